@@ -1,1 +1,60 @@
-fn main() {}
+//! `worldgraph`: the command-line entry point.
+//!
+//! Starts each role of the pipeline, runs the simulator's tools and the
+//! benchmarks. Shang et al. 2019 (arXiv:1907.00664) is implemented by the
+//! library crates; this binary only parses arguments (clap, low level),
+//! turns them into validated configs (high level) and calls them.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod commands;
+mod world;
+
+/// worldgraph: learn a graph of a maze's structure (pivotal states and the
+/// paths between them) and use it to make hierarchical RL fast.
+#[derive(Debug, Parser)]
+#[command(name = "worldgraph", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// The main job on the embedded default: render the medium maze, run a
+    /// short batched simulation and report its throughput.
+    Demo(commands::demo::DemoArgs),
+    /// Simulator tools: render a maze, trace an action sequence.
+    #[command(subcommand)]
+    Sim(commands::sim::SimCommand),
+    /// Benchmarks that print figures (never assertions).
+    #[command(subcommand)]
+    Bench(commands::bench::BenchCommand),
+}
+
+fn run() -> anyhow::Result<ExitCode> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Demo(args) => commands::demo::run(args),
+        Command::Sim(cmd) => commands::sim::run(cmd),
+        Command::Bench(cmd) => commands::bench::run(cmd),
+    }
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("WORLDGRAPH_LOG").unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    match run() {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,25 @@
+# The two commands of the README. Both fetch what they need (libtorch from
+# PyPI, crates from crates.io) on first use and cache it.
+CARGO ?= cargo
+
+.PHONY: demo test libtorch bench clean-shm
+
+# The main job on the embedded default.
+demo: libtorch
+	$(CARGO) run --release --bin worldgraph -- demo
+
+# Every test of the workspace (unit, property, multi-process, tch training).
+test: libtorch
+	$(CARGO) test --release --workspace --no-fail-fast
+	$(CARGO) build --release --workspace --benches
+
+libtorch:
+	@./scripts/setup-libtorch.sh >/dev/null
+
+bench: libtorch
+	$(CARGO) run --release --bin worldgraph -- bench sim --maze medium --envs 1024 --threads 2 --seconds 5
+
+# Remove shared-memory leftovers of killed test runs (iceoryx2 keeps one
+# 16-byte global-management file per prefix).
+clean-shm:
+	rm -f /dev/shm/wgtest_* /dev/shm/iox2test_*

@@ -1,0 +1,194 @@
+//! `worldgraph bench ...`: throughput and latency figures, each against a
+//! baseline measured in the same run.
+
+use std::time::{Duration, Instant};
+
+use clap::{Args, Subcommand};
+use rayon::prelude::*;
+use serde::Serialize;
+use sim::{BatchEnv, EnvMeta};
+
+use crate::world::WorldArgs;
+
+/// Benchmarks.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Batched simulator throughput against a memcpy of the same bytes.
+    Sim(BenchSimArgs),
+}
+
+/// `bench sim` options.
+#[derive(Debug, Clone, Args)]
+pub struct BenchSimArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    /// Environments in the batch.
+    #[arg(long, default_value_t = 1024)]
+    pub envs: usize,
+    /// Threads stepping the batch (and copying, for the baseline).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Seconds of each measurement (the simulator, then the memcpy baseline).
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Figures of `bench sim`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SimBenchReport {
+    /// Maze name.
+    pub maze: String,
+    /// Task name.
+    pub task: String,
+    /// Batch size.
+    pub envs: usize,
+    /// Threads.
+    pub threads: usize,
+    /// Environment steps per second of the batch (observations written).
+    pub steps_per_sec: f64,
+    /// Bytes of one environment's observation: grid cells + its `EnvMeta`.
+    pub obs_bytes_per_step: usize,
+    /// Bandwidth of copying the same observation bytes with the same threads.
+    pub memcpy_bytes_per_sec: f64,
+    /// `steps_per_sec / (memcpy_bytes_per_sec / obs_bytes_per_step)`.
+    pub ratio_to_memcpy_bound: f64,
+    /// One environment stepped on one thread, observation written.
+    pub single_env_steps_per_sec: f64,
+    /// Episodes finished during the batch measurement.
+    pub episodes: u64,
+}
+
+/// Runs a `bench` subcommand.
+pub fn run(cmd: BenchCommand) -> anyhow::Result<std::process::ExitCode> {
+    match cmd {
+        BenchCommand::Sim(a) => {
+            let r = bench_sim(&a)?;
+            if a.json {
+                println!("{}", serde_json::to_string(&r)?);
+            } else {
+                print_sim_report(&r);
+            }
+        }
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// A fixed table of uniformly random actions (the null policy), drawn once
+/// so the measured loop spends nothing on choosing actions.
+fn action_table(n: usize, num_actions: usize, seed: u64) -> Vec<u8> {
+    let mut x = sim::env_seed(seed, 0xac7) | 1;
+    (0..n)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            ((x >> 33) % num_actions as u64) as u8
+        })
+        .collect()
+}
+
+/// Measures the batched simulator and its memcpy bound.
+pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
+    anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
+    let (layout, cfg) = a.world.build()?;
+    let maze = layout.name.clone();
+    let mut batch = BatchEnv::new(layout.clone(), cfg, a.envs, a.world.seed, a.threads)?;
+    let mut buf = batch.buffers();
+    batch.reset(buf.out());
+    let n = a.envs;
+    // Offsets into the table change every step, so consecutive steps differ.
+    let table = action_table(n + 4099, cfg.task.num_actions(), a.world.seed);
+    let budget = Duration::from_secs_f64(a.seconds);
+
+    // Warm-up: page in buffers, start threads.
+    for s in 0..50 {
+        let o = (s * 7919) % 4099;
+        batch.step(&table[o..o + n], buf.out());
+    }
+    let mut steps = 0u64;
+    let mut episodes = 0u64;
+    let t0 = Instant::now();
+    while t0.elapsed() < budget {
+        for _ in 0..16 {
+            let o = (steps as usize * 7919 / n.max(1) + steps as usize) % 4099;
+            batch.step(&table[o..o + n], buf.out());
+            steps += n as u64;
+        }
+        episodes += buf.meta.iter().filter(|m| m.done()).count() as u64;
+    }
+    let steps_per_sec = steps as f64 / t0.elapsed().as_secs_f64();
+
+    // Baseline: copy the same bytes per step (cells and metas) with the same threads.
+    let cpe = batch.cells_per_env();
+    let obs_bytes_per_step = cpe + std::mem::size_of::<EnvMeta>();
+    let src: Vec<u8> = (0..n * obs_bytes_per_step).map(|i| i as u8).collect();
+    let mut dst = vec![0u8; n * obs_bytes_per_step];
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads).build()?;
+    let chunk = n.div_ceil(a.threads * 4).max(16) * obs_bytes_per_step;
+    let copy = |dst: &mut [u8]| {
+        pool.install(|| {
+            dst.par_chunks_mut(chunk).zip(src.par_chunks(chunk)).for_each(|(d, s)| d.copy_from_slice(s));
+        });
+        std::hint::black_box(&dst);
+    };
+    for _ in 0..50 {
+        copy(&mut dst);
+    }
+    let mut copies = 0u64;
+    let t0 = Instant::now();
+    while t0.elapsed() < budget {
+        for _ in 0..16 {
+            copy(&mut dst);
+            copies += 1;
+        }
+    }
+    let memcpy_bytes_per_sec = (copies * (n * obs_bytes_per_step) as u64) as f64 / t0.elapsed().as_secs_f64();
+
+    // One environment on one thread.
+    let mut single = BatchEnv::new(layout, cfg, 1, a.world.seed, 1)?;
+    let mut sbuf = single.buffers();
+    single.reset(sbuf.out());
+    let mut s_steps = 0u64;
+    let t0 = Instant::now();
+    let single_budget = budget.min(Duration::from_secs(1));
+    while t0.elapsed() < single_budget {
+        for k in 0..1024 {
+            single.step(&table[k..k + 1], sbuf.out());
+        }
+        s_steps += 1024;
+    }
+    let single_env_steps_per_sec = s_steps as f64 / t0.elapsed().as_secs_f64();
+
+    Ok(SimBenchReport {
+        maze,
+        task: cfg.task.name().to_string(),
+        envs: n,
+        threads: a.threads,
+        steps_per_sec,
+        obs_bytes_per_step,
+        memcpy_bytes_per_sec,
+        ratio_to_memcpy_bound: steps_per_sec * obs_bytes_per_step as f64 / memcpy_bytes_per_sec,
+        single_env_steps_per_sec,
+        episodes,
+    })
+}
+
+/// Prints the `bench sim` summary table.
+pub fn print_sim_report(r: &SimBenchReport) {
+    println!("bench sim: {} maze, {}, {} envs, {} threads", r.maze, r.task, r.envs, r.threads);
+    println!("  {:<34} {:>16}", "measure", "value");
+    println!("  {:<34} {:>16.2}M", "batched env-steps/s", r.steps_per_sec / 1e6);
+    println!("  {:<34} {:>16}", "observation bytes per env-step", r.obs_bytes_per_step);
+    println!("  {:<34} {:>16.2}", "memcpy of the same bytes (GB/s)", r.memcpy_bytes_per_sec / 1e9);
+    println!(
+        "  {:<34} {:>16.2}M",
+        "memcpy bound (env-steps/s)",
+        r.memcpy_bytes_per_sec / r.obs_bytes_per_step as f64 / 1e6
+    );
+    println!("  {:<34} {:>16.1}%", "ratio to the memcpy bound", r.ratio_to_memcpy_bound * 100.0);
+    println!("  {:<34} {:>16.2}M", "single env, one thread (steps/s)", r.single_env_steps_per_sec / 1e6);
+    println!("  {:<34} {:>16}", "episodes finished", r.episodes);
+}
