@@ -10,6 +10,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod commands;
+mod latency;
 mod world;
 
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the

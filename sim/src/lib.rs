@@ -31,6 +31,7 @@
 #![warn(missing_docs)]
 
 pub mod batch;
+pub mod chart;
 pub mod env;
 mod error;
 pub mod layout;
