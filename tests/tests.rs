@@ -1,1 +1,4 @@
-//! Cross-crate and multi-process tests, one binary.
+//! Cross-crate and multi-process tests, built as one binary.
+
+// The `worldgraph` command line: sim render/trace, bench sim, layout errors.
+mod cli;
