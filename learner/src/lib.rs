@@ -5,3 +5,5 @@
 //! goal-conditioned policy `π_g` (section 3.2), and the stage-2 agents (A2C,
 //! Feudal Manager/Worker with Wide-then-Narrow goals, section 4).
 #![deny(unsafe_code)]
+
+pub mod vae;

@@ -1,14 +1,89 @@
 //! # shm_schemas — the wire layout between worldgraph processes
 //!
-//! The only crate that knows how the sim, learner and planner processes lay
-//! out the data they share over iceoryx2 (DESIGN.md section 2). Every type
-//! here is `#[repr(C)]`, plain data, and carries a versioned type name.
+//! The only crate that knows how the sim, learner and planner processes of
+//! worldgraph (Shang et al. 2019, "Learning World Graphs to Accelerate
+//! Hierarchical Reinforcement Learning", arXiv:1907.00664) lay out the data
+//! they share over iceoryx2 shared memory (DESIGN.md section 2):
 //!
-//! - [`EnvMeta`]: the per-environment record of a step (reward, flags, agent
-//!   state, episode statistics). The simulator writes it directly into the
-//!   observation batch in shared memory.
+//! ```text
+//!   sim ── wg/<run>/obs  (ObsHeader + [EnvMeta; N] + N×H×W cells) ──► learner, planner
+//!   sim ◄─ wg/<run>/act  (ActHeader + N action bytes) ─────────────── learner
+//!   learner ── wg/<run>/route (RouteRequest → RouteResponse) ──► planner
+//!   planner ── wg/<run>/graph (GraphHeader + nodes + edges, latest only) ──► learner, viewers
+//! ```
+//!
+//! - [`step`](crate::ObsHeader): the observation batch. [`EnvMeta`] is the
+//!   per-environment record; [`ObsShape`] the run's batch and grid size;
+//!   [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,
+//!   &mut [EnvMeta], &mut [u8])` so the simulator steps straight into shared
+//!   memory; [`ObsBatch`] is the zero-copy read view.
+//! - [`ActHeader`], [`ActBatch`], [`ActBatchMut`]: the action batch.
+//! - [`RouteRequest`], [`RouteResponse`], [`RouteStatus`]: route queries.
+//! - [`GraphHeader`], [`GraphEdge`], [`GraphSnapshot`]: graph snapshots.
+//! - [`SchemaError`]: what a process gets, instead of garbage, when the
+//!   other end speaks another schema version or another shape;
+//!   [`ShmError`] wraps it with the transport's own failures.
+//! - [`service`]: names (`wg/<run>/obs`, ...), isolated configs, QoS, the
+//!   typed ports ([`service::PipelineNode`] → [`service::ObsPublisher`], ...),
+//!   dead-node cleanup and teardown.
+//! - [`SeqTracker`]: lost/reordered batch accounting.
+//!
+//! Every wire type is `#[repr(C)]`, [`bytemuck::Pod`] (no padding, checked
+//! at compile time), `ZeroCopySend` with a versioned type name
+//! (`wg.ObsHeader.v1`), with its size asserted at compile time. The only
+//! `unsafe` code of the workspace's IPC path lives in one private module
+//! (`raw.rs`), each block justified.
+//!
+//! ```
+//! use iceoryx2::prelude::*;
+//! use shm_schemas::service::{PipelineNode, RunName, isolated_config};
+//! use shm_schemas::{EnvMeta, ObsShape};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let run = RunName::new("doc")?;
+//! let config = isolated_config(&format!("wgdoc_{}_", std::process::id()))?;
+//! let shape = ObsShape::new(2, 3, 3)?;
+//! let sim = PipelineNode::<local::Service>::new(&config, run.clone(), "sim")?;
+//! let learner = PipelineNode::<local::Service>::new(&config, run, "learner")?;
+//! let publisher = sim.obs_publisher(shape)?;
+//! let subscriber = learner.obs_subscriber(shape)?;
+//!
+//! let mut sample = publisher.loan(0, 0)?;
+//! let batch = sample.batch_mut();
+//! batch.meta.fill(EnvMeta::EMPTY); // the simulator writes here ...
+//! batch.cells.fill(1);             // ... and here, in shared memory
+//! sample.send()?;
+//!
+//! let received = subscriber.receive()?.expect("sent above");
+//! assert_eq!(received.batch().cells, &[1; 18]);
+//! # Ok(())
+//! # }
+//! ```
 #![deny(unsafe_code)]
+#![deny(missing_docs)]
 
+mod action;
+mod error;
+mod graph;
+mod plan;
+mod raw;
+mod seq;
+pub mod service;
 mod step;
 
-pub use step::{EnvMeta, flags};
+pub use action::{ActBatch, ActBatchMut, ActHeader, NUM_ACTIONS};
+pub use error::{Channel, SchemaError, ShmError};
+pub use graph::{GraphEdge, GraphHeader, GraphSnapshot, GraphSnapshotMut, MAX_EDGES, MAX_PIVOTS};
+pub use plan::{
+    MAX_ROUTE_LEN, MAX_ROUTE_PIVOTS, NO_PIVOT, RouteRequest, RouteResponse, RouteStatus, UNREACHABLE,
+};
+pub use raw::monotonic_ns;
+pub use seq::{SeqEvent, SeqTracker};
+pub use step::{
+    CELLS_ALIGN, EnvMeta, MAX_CELLS, MAX_ENVS, MAX_GRID_SIDE, ObsBatch, ObsBatchMut, ObsHeader, ObsShape,
+    SENTINEL_BYTE, flags,
+};
+
+/// Version of the wire layout. Bumped on any change of a wire type; every
+/// type name ends in `.v<SCHEMA_VERSION>` and every header carries it.
+pub const SCHEMA_VERSION: u32 = 1;

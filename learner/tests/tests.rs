@@ -1,0 +1,4 @@
+//! Integration tests of the `learner` crate, built as one binary.
+
+// tch trains a tiny network: libtorch links, autograd and Adam work.
+mod tch_smoke;

@@ -1,0 +1,116 @@
+//! The crate's only `unsafe` code, in three small helpers:
+//!
+//! - [`assume_init_slice`] / [`assume_init_response`]: turn a freshly loaned,
+//!   "uninitialised" shared-memory chunk into an initialised one *without
+//!   writing it*, so the simulator's step can be the only write of an
+//!   observation (no memset, no copy).
+//! - [`split_slice_sample`]: borrow a sample's user header and payload
+//!   mutably at the same time (iceoryx2 offers one `&mut` accessor for each).
+//! - [`monotonic_ns`]: `CLOCK_MONOTONIC` in nanoseconds; [`type_name_of`]:
+//!   the type name iceoryx2 records for a payload type.
+//!
+//! ## Why skipping initialisation is sound here
+//!
+//! iceoryx2 hands loans out as `MaybeUninit<T>` because in general a chunk
+//! may never have been written. For this crate's channels, every byte of a
+//! data segment is nonetheless an initialised byte:
+//!
+//! 1. the segment is a POSIX shared-memory object, which the kernel
+//!    zero-fills when it is sized; bytes that come from outside the Rust
+//!    abstract machine (a `mmap`) are initialised, like file contents read
+//!    through a memory map;
+//! 2. afterwards the only writes into a chunk are whole values of the
+//!    channel's element or payload type, and every such type here is
+//!    [`bytemuck::Pod`]: it has no padding, so a write never leaves
+//!    uninitialised bytes behind (iceoryx2 checks type name, size and
+//!    alignment when a service is opened, so no other type can share the
+//!    segment);
+//! 3. every bit pattern is a valid value of a `Pod` type.
+//!
+//! Hence a loaned chunk holds valid (if stale: the previous sample's) values.
+//! The stale contents are why the views document that the writer must
+//! overwrite every meta record and cell; debug builds fill loans with a
+//! sentinel so a forgotten write shows up (STYLE.md item 10).
+#![allow(unsafe_code)]
+
+use core::fmt::Debug;
+use core::mem::MaybeUninit;
+
+use bytemuck::Pod;
+use iceoryx2::prelude::ZeroCopySend;
+use iceoryx2::response_mut::ResponseMut;
+use iceoryx2::response_mut_uninit::ResponseMutUninit;
+use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
+use iceoryx2::service::Service;
+
+/// Marks a slice loan as initialised without writing it (see the module doc).
+pub(crate) fn assume_init_slice<S, T, H>(
+    sample: SampleMutUninit<S, [MaybeUninit<T>], H>,
+) -> SampleMut<S, [T], H>
+where
+    S: Service,
+    T: Pod + ZeroCopySend + Debug,
+    H: ZeroCopySend + Debug,
+{
+    // SAFETY: the chunk lies in a kernel-zero-filled shared-memory segment
+    // that only ever receives whole `T` values, `T: Pod` has no padding and
+    // accepts every bit pattern, so all elements are initialised and valid
+    // (module doc, points 1-3).
+    unsafe { sample.assume_init() }
+}
+
+/// Marks a fixed-size response loan as initialised without writing it.
+pub(crate) fn assume_init_response<S, T, H>(
+    response: ResponseMutUninit<S, MaybeUninit<T>, H>,
+) -> ResponseMut<S, T, H>
+where
+    S: Service,
+    T: Pod + ZeroCopySend + Debug,
+    H: ZeroCopySend + Debug,
+{
+    // SAFETY: same argument as `assume_init_slice`: the response segment is
+    // kernel-zero-filled and only ever receives whole `T: Pod` values, so
+    // the chunk holds a valid `T`.
+    unsafe { response.assume_init() }
+}
+
+/// Mutable user header and payload of one sample at the same time.
+pub(crate) fn split_slice_sample<S, T, H>(sample: &mut SampleMut<S, [T], H>) -> (&mut H, &mut [T])
+where
+    S: Service,
+    T: ZeroCopySend + Debug,
+    H: ZeroCopySend + Debug,
+{
+    let header: *mut H = sample.user_header_mut();
+    let payload = sample.payload_mut();
+    // SAFETY: `header` points at the chunk's user header, which iceoryx2
+    // places before the payload without overlap (`user_header_ptr` +
+    // `size_of::<H>()` <= `payload_ptr`); the pointer stays valid while
+    // `sample` (borrowed mutably for the returned lifetime) keeps the chunk
+    // loaned, and no other reference to the header exists: the
+    // `user_header_mut` borrow it came from has ended, and `payload` covers
+    // only the payload bytes.
+    let header = unsafe { &mut *header };
+    (header, payload)
+}
+
+/// The type name iceoryx2 records for `T` (its `#[type_name]`).
+pub(crate) fn type_name_of<T: ZeroCopySend + ?Sized>() -> String {
+    // SAFETY: `ZeroCopySend::type_name` is `unsafe` because implementors
+    // promise that equal names mean equal layouts; calling it only reads a
+    // `&'static str` and has no precondition.
+    unsafe { <T as ZeroCopySend>::type_name() }.to_owned()
+}
+
+/// Current `CLOCK_MONOTONIC` time in nanoseconds: comparable between
+/// processes on one machine, so `now - header.send_time_ns` is a one-way
+/// latency.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable `timespec`; CLOCK_MONOTONIC is always
+    // supported on Linux, so the call only writes `ts`.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    debug_assert_eq!(rc, 0, "clock_gettime(CLOCK_MONOTONIC) failed");
+    (ts.tv_sec as u64) * 1_000_000_000 + ts.tv_nsec as u64
+}
