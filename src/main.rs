@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 
 mod commands;
 mod latency;
+mod roles;
 mod world;
 
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the
@@ -30,9 +31,29 @@ enum Command {
     /// Simulator tools: render a maze, trace an action sequence.
     #[command(subcommand)]
     Sim(commands::sim::SimCommand),
+    /// The learner process of the pipeline.
+    #[command(subcommand)]
+    Learner(LearnerCommand),
+    /// The planner process of the pipeline.
+    #[command(subcommand)]
+    Planner(PlannerCommand),
     /// Benchmarks that print figures (never assertions).
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum LearnerCommand {
+    /// Read observation batches from the sim over shared memory, run a
+    /// policy, send action batches.
+    Serve(roles::learner::LearnerServeArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum PlannerCommand {
+    /// Keep the world graph, count visits from the observation stream and
+    /// answer route requests.
+    Serve(roles::planner::PlannerServeArgs),
 }
 
 fn run() -> anyhow::Result<ExitCode> {
@@ -40,6 +61,8 @@ fn run() -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Demo(args) => commands::demo::run(args),
         Command::Sim(cmd) => commands::sim::run(cmd),
+        Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
+        Command::Planner(PlannerCommand::Serve(a)) => roles::planner::serve(a),
         Command::Bench(cmd) => commands::bench::run(cmd),
     }
 }

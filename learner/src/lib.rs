@@ -7,3 +7,7 @@
 #![deny(unsafe_code)]
 
 pub mod vae;
+pub mod actor_critic;
+pub mod batch_env;
+pub mod policy;
+pub mod shm_env;

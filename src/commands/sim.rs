@@ -17,6 +17,9 @@ pub enum SimCommand {
     Render(RenderArgs),
     /// Run one environment on a given action sequence and print each step.
     Trace(TraceArgs),
+    /// The sim process of the pipeline: step the batch on each action batch
+    /// and publish observations through shared memory.
+    Serve(crate::roles::sim::SimServeArgs),
 }
 
 /// `sim render` options.
@@ -54,6 +57,7 @@ pub fn run(cmd: SimCommand) -> anyhow::Result<std::process::ExitCode> {
     match cmd {
         SimCommand::Render(a) => render_cmd(a),
         SimCommand::Trace(a) => trace_cmd(a),
+        SimCommand::Serve(a) => return crate::roles::sim::serve(a),
     }
     .map(|()| std::process::ExitCode::SUCCESS)
 }

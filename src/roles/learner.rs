@@ -1,0 +1,201 @@
+//! The learner process: reads observation batches in place through the
+//! shared-memory [`ShmEnv`], runs a policy, sends action batches; optionally
+//! asks the planner for routes now and then (client-observed route latency).
+//!
+//! Hot-loop histograms: `policy` (choosing N actions), `obs_one_way`
+//! (sim's publish → this process's receive, from the header's send time),
+//! `route_client` (request → response, when `--route-every` is set).
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use clap::{Args, ValueEnum};
+use iceoryx2::prelude::ipc;
+use learner::actor_critic::ActorCriticConfig;
+use learner::batch_env::{BatchEnvironment, EnvError};
+use learner::policy::{ActorCriticPolicy, Policy, RandomPolicy};
+use learner::shm_env::{ShmEnv, ShmEnvOptions, StreamStats};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+use shm_schemas::ObsShape;
+
+use super::{EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE};
+use crate::latency::Latencies;
+use crate::world::WorldArgs;
+
+/// Which policy chooses the actions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+pub enum PolicyKind {
+    /// Uniformly random actions (the benchmark's null policy).
+    Random,
+    /// The A2C-LSTM actor-critic's forward pass (CNN encoder + LSTM core).
+    ActorCritic,
+}
+
+/// `learner serve` options.
+#[derive(Debug, Clone, Args)]
+pub struct LearnerServeArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[command(flatten)]
+    pub run: RunArgs,
+    /// Environments in the batch (must match the sim's).
+    #[arg(long, default_value_t = 256)]
+    pub envs: usize,
+    /// The policy.
+    #[arg(long, value_enum, default_value = "random")]
+    pub policy: PolicyKind,
+    /// Ask the planner for a route every this many batches (0 = never).
+    #[arg(long, default_value_t = 0)]
+    pub route_every: u64,
+}
+
+/// What the learner reports at exit (`learner.report.json`).
+#[derive(Debug, Serialize)]
+pub struct LearnerReport {
+    /// Policy name.
+    pub policy: String,
+    /// Observation stream accounting.
+    pub stream: StreamStats,
+    /// Batches answered.
+    pub batches: u64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Mean return of finished episodes.
+    pub mean_episode_return: f64,
+    /// Routes received / requested.
+    pub routes_ok: u64,
+    /// Route requests sent.
+    pub routes_requested: u64,
+    /// Why the loop ended.
+    pub stopped_by: String,
+}
+
+/// Runs the learner role until stopped; returns the process exit code.
+pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
+    let ctx = RunCtx::new(&a.run)?;
+    let (layout, cfg) = a.world.build()?;
+    let shape = ObsShape::new(a.envs, layout.width, layout.height)?;
+    let num_actions = cfg.task.num_actions();
+    let opts = ShmEnvOptions {
+        node_name: LEARNER_NODE.into(),
+        sim_node_name: SIM_NODE.into(),
+        stop: Some(ctx.stop.clone()),
+        connect_timeout: Duration::from_secs(3600),
+        ..ShmEnvOptions::default()
+    };
+    eprintln!("learner: run '{}', waiting for observation batches of {} x {}x{}", ctx.run, a.envs, shape.width, shape.height);
+    let mut env = match ShmEnv::<ipc::Service>::connect(&ctx.config, ctx.run.clone(), shape, num_actions, opts) {
+        Ok(env) => env,
+        Err(EnvError::Interrupted) => return Ok(std::process::ExitCode::SUCCESS),
+        Err(e) => return Err(e.into()),
+    };
+    let mut policy: Box<dyn Policy> = match a.policy {
+        PolicyKind::Random => Box::new(RandomPolicy::new(num_actions, a.world.seed ^ 0x5eed)),
+        PolicyKind::ActorCritic => Box::new(ActorCriticPolicy::new(
+            &ActorCriticConfig { num_actions: num_actions as i64, ..ActorCriticConfig::default() },
+            a.envs,
+            layout.width,
+            layout.height,
+            a.world.seed,
+        )),
+    };
+    let route_client = if a.route_every > 0 { Some(env.node().route_client()?) } else { None };
+    let graph = if a.route_every > 0 { Some(env.node().graph_subscriber(layout.width, layout.height)?) } else { None };
+    let mut num_pivots = 0usize;
+    let mut rng = SmallRng::seed_from_u64(a.world.seed);
+
+    let mut lat = Latencies::new("learner");
+    for h in ["policy", "obs_one_way", "route_client"] {
+        lat.register(h);
+    }
+    let mut stream_log = std::fs::File::create(ctx.dir.join("learner.stream.jsonl"))?;
+    let mut planner = PeerWatch::new(PLANNER_NODE);
+    let mut actions = vec![0u8; a.envs];
+    let (mut batches, mut episodes, mut return_sum) = (0u64, 0u64, 0f64);
+    let (mut routes_ok, mut routes_requested) = (0u64, 0u64);
+    let mut next_log = Instant::now() + Duration::from_secs(1);
+    let stopped_by;
+    loop {
+        let obs = env.observe();
+        for m in obs.meta.iter().filter(|m| m.done()) {
+            episodes += 1;
+            return_sum += m.episode_return as f64;
+        }
+        lat.record("obs_one_way", env.last_latency_ns());
+        let t0 = Instant::now();
+        policy.act(&obs, &mut actions);
+        lat.record("policy", t0.elapsed().as_nanos() as u64);
+        let (cell, dir) = {
+            let m = obs.meta[0];
+            (m.y as u32 * shape.width as u32 + m.x as u32, m.dir)
+        };
+        match env.step(&actions) {
+            Ok(()) => {}
+            Err(EnvError::Interrupted) => {
+                stopped_by = "stop request".to_string();
+                break;
+            }
+            Err(EnvError::PeerGone { detail, .. }) => {
+                eprintln!("learner: the sim is gone ({detail})");
+                if ctx.on_peer_death == OnPeerDeath::Exit {
+                    stopped_by = "sim died".to_string();
+                    break;
+                }
+                eprintln!("learner: waiting for a sim to rejoin");
+                match env.wait_for_peer(Duration::from_secs(3600)) {
+                    Ok(()) => eprintln!("learner: a sim rejoined at batch {}", env.observe().seq),
+                    Err(EnvError::Interrupted) => {
+                        stopped_by = "stop request".to_string();
+                        break;
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            Err(e) => return Err(e.into()),
+        }
+        batches += 1;
+
+        if let (Some(client), Some(graph)) = (&route_client, &graph)
+            && batches % a.route_every == 0
+        {
+            if let Some(s) = graph.receive()? {
+                num_pivots = s.snapshot().nodes.len();
+            }
+            planner.poll(&ctx);
+            if num_pivots > 0 && !planner.gone {
+                let to = rng.random_range(0..num_pivots) as u16;
+                let t0 = Instant::now();
+                routes_requested += 1;
+                if let Ok(reply) = client.request(0, cell, dir, to)?.wait(Duration::from_millis(50)) {
+                    lat.record("route_client", t0.elapsed().as_nanos() as u64);
+                    routes_ok += u64::from(reply.response().status() == Some(shm_schemas::RouteStatus::Ok));
+                }
+            }
+        }
+        if batches % 64 == 0 && Instant::now() >= next_log {
+            next_log = Instant::now() + Duration::from_secs(1);
+            writeln!(stream_log, "{}", serde_json::to_string(&env.stats())?)?;
+        }
+    }
+    writeln!(stream_log, "{}", serde_json::to_string(&env.stats())?)?;
+    let report = LearnerReport {
+        policy: policy.name().to_string(),
+        stream: env.stats(),
+        batches,
+        episodes,
+        mean_episode_return: if episodes > 0 { return_sum / episodes as f64 } else { f64::NAN },
+        routes_ok,
+        routes_requested,
+        stopped_by: stopped_by.clone(),
+    };
+    ctx.write_json("learner.report.json", &report)?;
+    lat.write_reports(&ctx.dir)?;
+    eprint!("{}", lat.table());
+    eprintln!(
+        "learner: {} batches, lost {}, reordered {}, sim restarts {}, stopped by {}",
+        batches, report.stream.lost, report.stream.reordered, report.stream.sim_restarts, stopped_by
+    );
+    Ok(if stopped_by == "sim died" { std::process::ExitCode::from(EXIT_PEER_DIED) } else { std::process::ExitCode::SUCCESS })
+}

@@ -1,0 +1,194 @@
+//! The three processes of the pipeline (DESIGN.md section 2) and what they
+//! share: the run's identity and directory, stop signals, peer watching.
+//!
+//! - [`sim`]: steps the batch on each action batch, writing observations
+//!   straight into loaned shared-memory samples.
+//! - [`learner`]: reads observation batches in place, runs a policy, sends
+//!   action batches.
+//! - [`planner`]: reads the same stream (coverage), owns the world graph,
+//!   answers route requests, publishes graph snapshots.
+//!
+//! Each role registers SIGINT/SIGTERM handlers that only set a flag; the hot
+//! loops poll it, so a stop always ends with reports written. Peers are
+//! watched through iceoryx2's node registry: a process whose peer's node is
+//! dead or missing for [`PEER_TIMEOUT`] says so and, as the user chose with
+//! `--on-peer-death`, waits for a restarted peer or exits cleanly.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use iceoryx2::config::Config;
+use iceoryx2::prelude::ipc;
+use serde::Serialize;
+use shm_schemas::service::{RunName, list_nodes, run_config};
+
+pub mod learner;
+pub mod planner;
+pub mod sim;
+
+/// iceoryx2 node name of the simulator process.
+pub const SIM_NODE: &str = "sim";
+/// iceoryx2 node name of the learner process.
+pub const LEARNER_NODE: &str = "learner";
+/// iceoryx2 node name of the planner process.
+pub const PLANNER_NODE: &str = "planner";
+/// How long a peer's node may be dead or missing before a process says so.
+pub const PEER_TIMEOUT: Duration = Duration::from_millis(500);
+/// How often the hot loops look at the node registry while waiting.
+pub const PEER_CHECK_EVERY: Duration = Duration::from_millis(50);
+
+/// What a process does when a peer it depends on dies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+pub enum OnPeerDeath {
+    /// Say so and wait for a restarted peer to rejoin.
+    Wait,
+    /// Say so, write the reports and exit (status 3).
+    Exit,
+}
+
+/// Exit status of a role that stopped because a peer died (`--on-peer-death exit`).
+pub const EXIT_PEER_DIED: u8 = 3;
+
+/// The run a role belongs to.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// Run name: names the shared-memory services (`wg/<run>/...`) and files
+    /// (`/dev/shm/wg_<run>_*`); letters, digits, '_', '.', '-'.
+    #[arg(long, default_value = "default")]
+    pub run: String,
+    /// Run directory for reports, histograms and pictures [default: runs/<run>].
+    #[arg(long)]
+    pub run_dir: Option<PathBuf>,
+    /// When a peer process dies: wait for its restart, or exit.
+    #[arg(long, value_enum, default_value = "wait")]
+    pub on_peer_death: OnPeerDeath,
+    /// Stop after this many seconds (default: run until Ctrl-C / SIGTERM).
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+/// The resolved identity of a role's run.
+pub struct RunCtx {
+    /// Run name.
+    pub run: RunName,
+    /// The run's iceoryx2 config (its own prefix).
+    pub config: Config,
+    /// Run directory (created).
+    pub dir: PathBuf,
+    /// Peer-death policy.
+    pub on_peer_death: OnPeerDeath,
+    /// Set by SIGINT/SIGTERM or when the duration is over.
+    pub stop: Arc<AtomicBool>,
+    deadline: Option<Instant>,
+}
+
+impl RunCtx {
+    /// Resolves the run, creates its directory and installs the stop handlers.
+    pub fn new(a: &RunArgs) -> anyhow::Result<RunCtx> {
+        let run = RunName::new(&a.run)?;
+        let config = run_config(&run)?;
+        let dir = a.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(run.as_str()));
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create run directory {}", dir.display()))?;
+        let stop = Arc::new(AtomicBool::new(false));
+        for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            signal_hook::flag::register(sig, Arc::clone(&stop)).context("cannot install signal handlers")?;
+        }
+        if let Some(d) = a.duration {
+            anyhow::ensure!(d > 0.0, "--duration must be positive");
+        }
+        let deadline = a.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
+        Ok(RunCtx { run, config, dir, on_peer_death: a.on_peer_death, stop, deadline })
+    }
+
+    /// True once a stop was requested or the duration is over.
+    pub fn should_stop(&self) -> bool {
+        if self.deadline.is_some_and(|d| Instant::now() >= d) {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Whether a live node named `name` is registered in this run.
+    pub fn peer_alive(&self, name: &str) -> bool {
+        list_nodes::<ipc::Service>(&self.config)
+            .map(|nodes| nodes.iter().any(|n| n.alive && n.name == name))
+            .unwrap_or(false)
+    }
+
+    /// Writes `value` as pretty JSON to `<run dir>/<name>` atomically.
+    pub fn write_json<T: Serialize>(&self, name: &str, value: &T) -> anyhow::Result<()> {
+        let bytes = serde_json::to_vec_pretty(value)?;
+        ::sim::render::write_atomic(&self.dir.join(name), &bytes)?;
+        Ok(())
+    }
+}
+
+/// Watches one peer from a waiting loop: reports when it has been gone for
+/// [`PEER_TIMEOUT`] and when it is back.
+#[derive(Debug)]
+pub struct PeerWatch {
+    name: &'static str,
+    next_check: Instant,
+    missing_since: Option<Instant>,
+    /// The peer was declared gone and has not come back yet.
+    pub gone: bool,
+    /// Times the peer was declared gone.
+    pub deaths: u64,
+}
+
+/// What [`PeerWatch::poll`] saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PeerEvent {
+    /// Nothing new.
+    Quiet,
+    /// The peer has just been declared gone.
+    Died,
+    /// A gone peer is back.
+    Back,
+}
+
+impl PeerWatch {
+    /// Watches node `name`.
+    pub fn new(name: &'static str) -> PeerWatch {
+        PeerWatch { name, next_check: Instant::now(), missing_since: None, gone: false, deaths: 0 }
+    }
+
+    /// Checks the registry at most every [`PEER_CHECK_EVERY`].
+    pub fn poll(&mut self, ctx: &RunCtx) -> PeerEvent {
+        let now = Instant::now();
+        if now < self.next_check {
+            return PeerEvent::Quiet;
+        }
+        self.next_check = now + PEER_CHECK_EVERY;
+        if ctx.peer_alive(self.name) {
+            self.missing_since = None;
+            if self.gone {
+                self.gone = false;
+                return PeerEvent::Back;
+            }
+            return PeerEvent::Quiet;
+        }
+        let since = *self.missing_since.get_or_insert(now);
+        if !self.gone && now - since >= PEER_TIMEOUT {
+            self.gone = true;
+            self.deaths += 1;
+            return PeerEvent::Died;
+        }
+        PeerEvent::Quiet
+    }
+
+    /// Forgets the last check so the next poll looks at the registry.
+    pub fn check_now(&mut self) {
+        self.next_check = Instant::now();
+    }
+}
+
+/// Resident set size of process `pid` in KiB (Linux `/proc`), if readable.
+pub fn rss_kib(pid: u32) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    s.lines().find(|l| l.starts_with("VmRSS:"))?.split_whitespace().nth(1)?.parse().ok()
+}

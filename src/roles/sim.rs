@@ -1,0 +1,228 @@
+//! The sim process: owns the batch of environments and publishes each
+//! observation batch by stepping the environments **directly into a loaned
+//! shared-memory sample** (no intermediate copy), then waits for the action
+//! batch that answers it (lock-step, see `shm_schemas::service`).
+//!
+//! Hot-loop histograms: `step` (stepping N environments into the sample),
+//! `action_round_trip` (publish of observation k → receipt of action k).
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use iceoryx2::prelude::ipc;
+use serde::Serialize;
+use shm_schemas::ObsShape;
+use shm_schemas::service::PipelineNode;
+use sim::{BatchEnv, StepOut};
+
+use super::{EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE};
+use crate::latency::Latencies;
+use crate::world::WorldArgs;
+
+/// `sim serve` options.
+#[derive(Debug, Clone, Args)]
+pub struct SimServeArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[command(flatten)]
+    pub run: RunArgs,
+    /// Environments in the batch.
+    #[arg(long, default_value_t = 256)]
+    pub envs: usize,
+    /// Threads stepping the batch (1 leaves the other core to the learner).
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+}
+
+/// What the sim reports at exit (`sim.report.json`).
+#[derive(Debug, Serialize)]
+pub struct SimReport {
+    /// Batches published.
+    pub batches: u64,
+    /// Environment steps taken.
+    pub env_steps: u64,
+    /// Seconds from the first to the last published batch.
+    pub seconds: f64,
+    /// `env_steps / seconds`.
+    pub steps_per_sec: f64,
+    /// Action batches that did not answer the waited-for observation (ignored).
+    pub stale_actions: u64,
+    /// Times the learner was declared gone.
+    pub learner_deaths: u64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Round trip percentiles (µs).
+    pub roundtrip_p50_us: f64,
+    /// Round trip p99 (µs).
+    pub roundtrip_p99_us: f64,
+    /// Step p50 (µs).
+    pub step_p50_us: f64,
+    /// Why the loop ended.
+    pub stopped_by: String,
+}
+
+/// One line of `sim.stats.jsonl`, written every second.
+#[derive(Debug, Serialize)]
+struct StatsLine {
+    t: f64,
+    seq: u64,
+    steps_per_sec: f64,
+    roundtrip_p99_us: f64,
+    learner_alive: bool,
+}
+
+/// Runs the sim role until stopped; returns the process exit code.
+pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
+    let ctx = RunCtx::new(&a.run)?;
+    let (layout, cfg) = a.world.build()?;
+    let shape = ObsShape::new(a.envs, layout.width, layout.height)?;
+    let mut batch = BatchEnv::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
+    let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), SIM_NODE)?;
+    let cleaned = node.cleanup_dead_nodes();
+    if cleaned.cleanups > 0 {
+        tracing::info!("sim: removed stale resources of {} dead node(s) of a previous run", cleaned.cleanups);
+    }
+    let publisher = node.obs_publisher(shape).context("sim: cannot open the observation service")?;
+    let actions = node.act_subscriber(a.envs).context("sim: cannot open the action service")?;
+    tracing::info!(
+        "sim: run '{}', {} x {}x{} {} on '{}', publishing",
+        ctx.run,
+        a.envs,
+        shape.width,
+        shape.height,
+        cfg.task,
+        batch.layout().name
+    );
+
+    let mut lat = Latencies::new("sim");
+    lat.register("step");
+    lat.register("action_round_trip");
+    let mut minute = Latencies::new("sim");
+    minute.register("action_round_trip");
+    let mut stats = std::fs::File::create(ctx.dir.join("sim.stats.jsonl"))?;
+    let mut learner = PeerWatch::new(LEARNER_NODE);
+
+    // Batch 0: the first observations, written in place.
+    let mut seq = 0u64;
+    let mut sample = publisher.loan(seq, 0)?;
+    {
+        let (_, meta, cells) = sample.batch_mut().into_parts();
+        batch.reset(StepOut { cells, meta });
+    }
+    sample.send()?;
+    let mut sent_at = Instant::now();
+    let started = sent_at;
+    let (mut env_steps, mut episodes, mut stale) = (0u64, 0u64, 0u64);
+    let mut next_stats = started + Duration::from_secs(1);
+    let (mut last_stats_seq, mut last_stats_t) = (0u64, started);
+    let mut stopped_by = "stop request".to_string();
+    let mut spins = 0u32;
+
+    'run: loop {
+        // Wait for the action batch answering `seq`.
+        let act = loop {
+            if let Some(act) = actions.receive()? {
+                if act.header().seq == seq {
+                    break act;
+                }
+                stale += 1;
+                continue;
+            }
+            spins = spins.wrapping_add(1);
+            if spins % 128 != 0 {
+                std::hint::spin_loop();
+                continue;
+            }
+            if ctx.should_stop() {
+                break 'run;
+            }
+            match learner.poll(&ctx) {
+                PeerEvent::Died => {
+                    eprintln!("sim: the learner is gone (no live '{LEARNER_NODE}' node for {:?})", super::PEER_TIMEOUT);
+                    node.cleanup_dead_nodes();
+                    if ctx.on_peer_death == OnPeerDeath::Exit {
+                        stopped_by = "learner died".into();
+                        break 'run;
+                    }
+                    eprintln!("sim: waiting for a learner to rejoin at batch {seq}");
+                }
+                PeerEvent::Back => eprintln!("sim: a learner rejoined; continuing at batch {seq}"),
+                PeerEvent::Quiet => {}
+            }
+            if sent_at.elapsed() > Duration::from_millis(5) {
+                // A late or restarted learner gets the waited-for batch from
+                // history when connections are updated.
+                publisher.update_connections()?;
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        };
+        let now = Instant::now();
+        let rtt = (now - sent_at).as_nanos() as u64;
+        lat.record("action_round_trip", rtt);
+        minute.record("action_round_trip", rtt);
+
+        // Step straight into the next loaned sample.
+        seq += 1;
+        let mut sample = publisher.loan(seq, seq)?;
+        {
+            let (_, meta, cells) = sample.batch_mut().into_parts();
+            batch.step(act.actions(), StepOut { cells, meta });
+            episodes += meta.iter().filter(|m| m.done()).count() as u64;
+        }
+        drop(act);
+        let stepped = Instant::now();
+        lat.record("step", (stepped - now).as_nanos() as u64);
+        sample.send()?;
+        sent_at = Instant::now();
+        env_steps += a.envs as u64;
+
+        if sent_at >= next_stats {
+            let dt = (sent_at - last_stats_t).as_secs_f64();
+            let line = StatsLine {
+                t: (sent_at - started).as_secs_f64(),
+                seq,
+                steps_per_sec: (seq - last_stats_seq) as f64 * a.envs as f64 / dt,
+                roundtrip_p99_us: minute.percentile_us("action_round_trip", 99.0),
+                learner_alive: !learner.gone,
+            };
+            writeln!(stats, "{}", serde_json::to_string(&line)?)?;
+            minute.reset();
+            (last_stats_seq, last_stats_t) = (seq, sent_at);
+            next_stats = sent_at + Duration::from_secs(1);
+            if ctx.should_stop() {
+                break;
+            }
+        }
+    }
+
+    let seconds = (sent_at - started).as_secs_f64().max(1e-9);
+    let report = SimReport {
+        batches: seq + 1,
+        env_steps,
+        seconds,
+        steps_per_sec: env_steps as f64 / seconds,
+        stale_actions: stale,
+        learner_deaths: learner.deaths,
+        episodes,
+        roundtrip_p50_us: lat.percentile_us("action_round_trip", 50.0),
+        roundtrip_p99_us: lat.percentile_us("action_round_trip", 99.0),
+        step_p50_us: lat.percentile_us("step", 50.0),
+        stopped_by: stopped_by.clone(),
+    };
+    ctx.write_json("sim.report.json", &report)?;
+    lat.write_reports(&ctx.dir)?;
+    eprint!("{}", lat.table());
+    eprintln!(
+        "sim: {} batches, {:.2}M env-steps/s, stopped by {}",
+        report.batches,
+        report.steps_per_sec / 1e6,
+        stopped_by
+    );
+    Ok(if stopped_by == "learner died" {
+        std::process::ExitCode::from(EXIT_PEER_DIED)
+    } else {
+        std::process::ExitCode::SUCCESS
+    })
+}
