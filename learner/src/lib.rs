@@ -1,13 +1,21 @@
 //! # learner — models and algorithms (tch)
 //!
 //! Shang et al. 2019 (arXiv:1907.00664): the recurrent variational model that
-//! discovers pivotal states (section 3.1), the curiosity-driven
+//! discovers pivotal states (section 3.1, [`vae`]), the curiosity-driven
 //! goal-conditioned policy `π_g` (section 3.2), and the stage-2 agents (A2C,
 //! Feudal Manager/Worker with Wide-then-Narrow goals, section 4).
+//!
+//! [`vae::LatentModel`] reads padded batches of agent trajectories
+//! ([`vae::TrajectoryBatch`]), learns a Beta prior per state, and ranks the
+//! visited states by prior mean into the pivotal states `V_p`; its per-step
+//! action reconstruction error is the curiosity bonus of `π_g`.
 #![deny(unsafe_code)]
 
-pub mod vae;
 pub mod actor_critic;
 pub mod batch_env;
+pub mod error;
 pub mod policy;
 pub mod shm_env;
+pub mod vae;
+
+pub use error::{ConfigError, LearnerError};

@@ -2,9 +2,54 @@
 //!
 //! Implements the graph side of Shang et al. 2019, *Learning World Graphs to
 //! Accelerate Hierarchical Reinforcement Learning* (arXiv:1907.00664),
-//! section 3.3: nodes are pivotal states (or any candidate set such as
-//! `V_rand`), edges come from random walks that reach another node without
-//! touching a third, and traversal between nodes is planned by dynamic
-//! programming over the edge weights. The route service answers requests
-//! from the learner over iceoryx2.
+//! section 3.3 ("Edge Connections") and section 4.2 ("Using World Graph
+//! Edges for Traversal"):
+//!
+//! 1. **Nodes** ([`pivotal`]): pivotal states `V_p`, or a comparison set —
+//!    `V_all` (every cell), `V_rand` (random cells), a list from a file.
+//! 2. **Edges** ([`edges`]): random walks in the simulator from each node;
+//!    `s_p → s_q` when a walk reaches `s_q` without touching a third node;
+//!    the shortest such path is kept (and shortened by an exact search),
+//!    its action count is the edge weight. Doors, keys and one-way effects
+//!    are the simulator's own.
+//! 3. **Traversal** ([`shortest_path`], [`world_graph`]): all-pairs
+//!    shortest paths by dynamic programming (Floyd–Warshall with a
+//!    next-hop table) and routes — nodes, cells and executable actions —
+//!    written into caller buffers.
+//!
+//! [`Coverage`] counts visited cells from observation batches. Everything
+//! here is pure: the iceoryx2 route service only turns requests into calls
+//! of [`WorldGraph::route_from_pose_into`] and friends.
+//!
+//! ```
+//! use planner::{CandidateSet, PlannerConfig, Route, WorldGraph};
+//! let layout = sim::Maze::Small.layout(false);
+//! let cfg = PlannerConfig { candidates: CandidateSet::Random { k: 8 }, walks_per_node: 64, ..Default::default() };
+//! let graph = WorldGraph::build(&layout, &cfg, &[]).unwrap();
+//! let mut route = Route::with_capacity(256, 16);
+//! let (a, b) = (planner::NodeId(0), planner::NodeId(7));
+//! if graph.distance(a, b) != planner::UNREACHABLE {
+//!     let n = graph.route_into(a, 0, b, &mut route).unwrap();
+//!     assert_eq!(route.nodes().last(), Some(&b));
+//!     assert_eq!(n, route.actions().len());
+//! }
+//! ```
 #![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod config;
+pub mod coverage;
+pub mod edges;
+mod error;
+mod ids;
+pub mod pivotal;
+pub mod shortest_path;
+pub mod world_graph;
+
+pub use config::{CandidateSet, MAX_NODES, PlannerConfig};
+pub use coverage::Coverage;
+pub use edges::{EdgePath, EdgeWorld};
+pub use error::PlannerError;
+pub use ids::{CellIdx, NodeId};
+pub use shortest_path::{ShortestPaths, UNREACHABLE};
+pub use world_graph::{Route, RouteWorld, WorldGraph};

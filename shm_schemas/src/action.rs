@@ -34,7 +34,13 @@ pub struct ActHeader {
 impl ActHeader {
     /// A header for `num_envs` environments in run `run_id`, answering `seq`.
     pub fn new(num_envs: u32, run_id: u64, seq: u64) -> ActHeader {
-        ActHeader { schema_version: SCHEMA_VERSION, num_envs, run_id, seq, send_time_ns: 0 }
+        ActHeader {
+            schema_version: SCHEMA_VERSION,
+            num_envs,
+            run_id,
+            seq,
+            send_time_ns: 0,
+        }
     }
 
     /// Checks version, run and batch size against what this process expects.
@@ -42,7 +48,11 @@ impl ActHeader {
         check_version(Channel::Act, self.schema_version)?;
         check_run(Channel::Act, run_id, self.run_id)?;
         if self.num_envs != num_envs {
-            return Err(SchemaError::BatchSize { channel: Channel::Act, expected: num_envs, wire: self.num_envs });
+            return Err(SchemaError::BatchSize {
+                channel: Channel::Act,
+                expected: num_envs,
+                wire: self.num_envs,
+            });
         }
         Ok(())
     }
@@ -66,10 +76,18 @@ pub struct ActBatch<'a> {
 impl<'a> ActBatch<'a> {
     /// Views `payload` after checking `header` against the expected batch
     /// size and run.
-    pub fn new(header: &'a ActHeader, payload: &'a [u8], num_envs: u32, run_id: u64) -> Result<ActBatch<'a>, SchemaError> {
+    pub fn new(
+        header: &'a ActHeader,
+        payload: &'a [u8],
+        num_envs: u32,
+        run_id: u64,
+    ) -> Result<ActBatch<'a>, SchemaError> {
         header.check(num_envs, run_id)?;
         check_len(Channel::Act, num_envs as usize, payload.len())?;
-        Ok(ActBatch { header, actions: &payload[..num_envs as usize] })
+        Ok(ActBatch {
+            header,
+            actions: &payload[..num_envs as usize],
+        })
     }
 }
 
@@ -96,8 +114,18 @@ mod tests {
         let acts = [0u8, 1, 2, 6];
         let b = ActBatch::new(&h, &acts, 4, 9).unwrap();
         assert_eq!(b.actions, &acts);
-        assert!(matches!(ActBatch::new(&h, &acts, 5, 9), Err(SchemaError::BatchSize { expected: 5, wire: 4, .. })));
-        assert!(matches!(ActBatch::new(&h, &acts[..3], 4, 9), Err(SchemaError::PayloadTooShort { .. })));
+        assert!(matches!(
+            ActBatch::new(&h, &acts, 5, 9),
+            Err(SchemaError::BatchSize {
+                expected: 5,
+                wire: 4,
+                ..
+            })
+        ));
+        assert!(matches!(
+            ActBatch::new(&h, &acts[..3], 4, 9),
+            Err(SchemaError::PayloadTooShort { .. })
+        ));
         assert!(check_num_envs(0).is_err());
         assert_eq!(check_num_envs(MAX_ENVS).unwrap(), MAX_ENVS as u32);
     }

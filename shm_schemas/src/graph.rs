@@ -75,7 +75,11 @@ impl GraphHeader {
         check_version(Channel::Graph, self.schema_version)?;
         check_run(Channel::Graph, run_id, self.run_id)?;
         if (self.width, self.height) != (width, height) {
-            return Err(SchemaError::GridShape { channel: Channel::Graph, expected: (width, height), wire: (self.width, self.height) });
+            return Err(SchemaError::GridShape {
+                channel: Channel::Graph,
+                expected: (width, height),
+                wire: (self.width, self.height),
+            });
         }
         Ok(())
     }
@@ -84,16 +88,28 @@ impl GraphHeader {
 /// Checks node and edge counts against [`MAX_PIVOTS`] and [`MAX_EDGES`]
 /// (zero is allowed: an empty graph).
 pub(crate) fn check_counts(num_nodes: usize, num_edges: usize) -> Result<(), SchemaError> {
-    for (what, value, max) in [("num_nodes", num_nodes, MAX_PIVOTS), ("num_edges", num_edges, MAX_EDGES)] {
+    for (what, value, max) in [
+        ("num_nodes", num_nodes, MAX_PIVOTS),
+        ("num_edges", num_edges, MAX_EDGES),
+    ] {
         if value > max {
-            return Err(SchemaError::OutOfRange { channel: Channel::Graph, what, value, max });
+            return Err(SchemaError::OutOfRange {
+                channel: Channel::Graph,
+                what,
+                value,
+                max,
+            });
         }
     }
     Ok(())
 }
 
 /// Checks a grid size against [`MAX_GRID_SIDE`].
-pub(crate) fn check_grid(channel: Channel, width: usize, height: usize) -> Result<(u16, u16), SchemaError> {
+pub(crate) fn check_grid(
+    channel: Channel,
+    width: usize,
+    height: usize,
+) -> Result<(u16, u16), SchemaError> {
     check_range(channel, "width", width, MAX_GRID_SIDE)?;
     check_range(channel, "height", height, MAX_GRID_SIDE)?;
     Ok((width as u16, height as u16))
@@ -112,14 +128,24 @@ pub struct GraphSnapshot<'a> {
 
 impl<'a> GraphSnapshot<'a> {
     /// Views `payload` after checking `header`.
-    pub fn new(header: &'a GraphHeader, payload: &'a [u32], width: u16, height: u16, run_id: u64) -> Result<GraphSnapshot<'a>, SchemaError> {
+    pub fn new(
+        header: &'a GraphHeader,
+        payload: &'a [u32],
+        width: u16,
+        height: u16,
+        run_id: u64,
+    ) -> Result<GraphSnapshot<'a>, SchemaError> {
         header.check(width, height, run_id)?;
         let (n, m) = (header.num_nodes as usize, header.num_edges as usize);
         check_counts(n, m)?;
         let words = GraphHeader::payload_words(n, m);
         check_len(Channel::Graph, words * 4, payload.len() * 4)?;
         let (nodes, rest) = payload[..words].split_at(n);
-        Ok(GraphSnapshot { header, nodes, edges: bytemuck::cast_slice(rest) })
+        Ok(GraphSnapshot {
+            header,
+            nodes,
+            edges: bytemuck::cast_slice(rest),
+        })
     }
 }
 
@@ -137,7 +163,12 @@ pub struct GraphSnapshotMut<'a> {
 impl<'a> GraphSnapshotMut<'a> {
     /// Views `payload` as `num_nodes` nodes and `num_edges` edges, writing
     /// the counts and version into the header.
-    pub(crate) fn new(header: &'a mut GraphHeader, payload: &'a mut [u32], num_nodes: usize, num_edges: usize) -> Result<GraphSnapshotMut<'a>, SchemaError> {
+    pub(crate) fn new(
+        header: &'a mut GraphHeader,
+        payload: &'a mut [u32],
+        num_nodes: usize,
+        num_edges: usize,
+    ) -> Result<GraphSnapshotMut<'a>, SchemaError> {
         check_counts(num_nodes, num_edges)?;
         let words = GraphHeader::payload_words(num_nodes, num_edges);
         check_len(Channel::Graph, words * 4, payload.len() * 4)?;
@@ -145,7 +176,11 @@ impl<'a> GraphSnapshotMut<'a> {
         header.num_nodes = num_nodes as u32;
         header.num_edges = num_edges as u32;
         let (nodes, rest) = payload[..words].split_at_mut(num_nodes);
-        Ok(GraphSnapshotMut { header, nodes, edges: bytemuck::cast_slice_mut(rest) })
+        Ok(GraphSnapshotMut {
+            header,
+            nodes,
+            edges: bytemuck::cast_slice_mut(rest),
+        })
     }
 }
 
@@ -162,21 +197,56 @@ mod tests {
     #[test]
     fn snapshot_views() {
         let mut payload = vec![0u32; GraphHeader::payload_words(3, 2)];
-        let mut h = GraphHeader { run_id: 4, width: 13, height: 13, ..Default::default() };
+        let mut h = GraphHeader {
+            run_id: 4,
+            width: 13,
+            height: 13,
+            ..Default::default()
+        };
         {
             let g = GraphSnapshotMut::new(&mut h, &mut payload, 3, 2).unwrap();
             g.nodes.copy_from_slice(&[14, 20, 150]);
-            g.edges[0] = GraphEdge { from: 0, to: 1, weight: 6 };
-            g.edges[1] = GraphEdge { from: 1, to: 2, weight: 11 };
+            g.edges[0] = GraphEdge {
+                from: 0,
+                to: 1,
+                weight: 6,
+            };
+            g.edges[1] = GraphEdge {
+                from: 1,
+                to: 2,
+                weight: 11,
+            };
             g.header.graph_version = 9;
         }
         let g = GraphSnapshot::new(&h, &payload, 13, 13, 4).unwrap();
         assert_eq!(g.nodes, &[14, 20, 150]);
-        assert_eq!(g.edges[1], GraphEdge { from: 1, to: 2, weight: 11 });
+        assert_eq!(
+            g.edges[1],
+            GraphEdge {
+                from: 1,
+                to: 2,
+                weight: 11
+            }
+        );
         assert_eq!(g.header.graph_version, 9);
-        assert!(matches!(GraphSnapshot::new(&h, &payload, 25, 19, 4), Err(SchemaError::GridShape { .. })));
-        assert!(matches!(GraphSnapshot::new(&h, &payload[..5], 13, 13, 4), Err(SchemaError::PayloadTooShort { .. })));
-        let empty = GraphHeader { num_nodes: 0, num_edges: 0, ..h };
-        assert!(GraphSnapshot::new(&empty, &[], 13, 13, 4).unwrap().nodes.is_empty());
+        assert!(matches!(
+            GraphSnapshot::new(&h, &payload, 25, 19, 4),
+            Err(SchemaError::GridShape { .. })
+        ));
+        assert!(matches!(
+            GraphSnapshot::new(&h, &payload[..5], 13, 13, 4),
+            Err(SchemaError::PayloadTooShort { .. })
+        ));
+        let empty = GraphHeader {
+            num_nodes: 0,
+            num_edges: 0,
+            ..h
+        };
+        assert!(
+            GraphSnapshot::new(&empty, &[], 13, 13, 4)
+                .unwrap()
+                .nodes
+                .is_empty()
+        );
     }
 }

@@ -75,13 +75,14 @@ pub use action::{ActBatch, ActBatchMut, ActHeader, NUM_ACTIONS};
 pub use error::{Channel, SchemaError, ShmError};
 pub use graph::{GraphEdge, GraphHeader, GraphSnapshot, GraphSnapshotMut, MAX_EDGES, MAX_PIVOTS};
 pub use plan::{
-    MAX_ROUTE_LEN, MAX_ROUTE_PIVOTS, NO_PIVOT, RouteRequest, RouteResponse, RouteStatus, UNREACHABLE,
+    MAX_ROUTE_LEN, MAX_ROUTE_PIVOTS, NO_PIVOT, RouteRequest, RouteResponse, RouteStatus,
+    UNREACHABLE,
 };
 pub use raw::monotonic_ns;
 pub use seq::{SeqEvent, SeqTracker};
 pub use step::{
-    CELLS_ALIGN, EnvMeta, MAX_CELLS, MAX_ENVS, MAX_GRID_SIDE, ObsBatch, ObsBatchMut, ObsHeader, ObsShape,
-    SENTINEL_BYTE, flags,
+    CELLS_ALIGN, EnvMeta, MAX_CELLS, MAX_ENVS, MAX_GRID_SIDE, ObsBatch, ObsBatchMut, ObsHeader,
+    ObsShape, SENTINEL_BYTE, flags,
 };
 
 /// Version of the wire layout. Bumped on any change of a wire type; every

@@ -90,8 +90,24 @@ pub struct RouteRequest {
 
 impl RouteRequest {
     /// A request of this schema version.
-    pub fn new(request_id: u64, run_id: u64, env: u32, from_cell: u32, from_dir: u8, to_pivot: u16) -> RouteRequest {
-        RouteRequest { request_id, run_id, schema_version: SCHEMA_VERSION, env, from_cell, to_pivot, from_dir, reserved: 0 }
+    pub fn new(
+        request_id: u64,
+        run_id: u64,
+        env: u32,
+        from_cell: u32,
+        from_dir: u8,
+        to_pivot: u16,
+    ) -> RouteRequest {
+        RouteRequest {
+            request_id,
+            run_id,
+            schema_version: SCHEMA_VERSION,
+            env,
+            from_cell,
+            to_pivot,
+            from_dir,
+            reserved: 0,
+        }
     }
 
     /// Checks version and run (the server answers [`RouteStatus::BadRequest`] on error).
@@ -154,7 +170,11 @@ impl RouteResponse {
     /// Total weight of the route (its action count), or [`UNREACHABLE`]
     /// when the status is not `Ok`.
     pub fn total_weight(&self) -> u32 {
-        if self.status == RouteStatus::Ok as u32 { self.num_actions } else { UNREACHABLE }
+        if self.status == RouteStatus::Ok as u32 {
+            self.num_actions
+        } else {
+            UNREACHABLE
+        }
     }
 
     /// Fills the response in place: header fields, then the used prefixes
@@ -178,7 +198,11 @@ impl RouteResponse {
         self.status = status as u32;
         if cells.len() != actions.len() {
             self.status = RouteStatus::BadRequest as u32;
-            return Err(SchemaError::PayloadTooShort { channel: Channel::Route, needed: actions.len(), got: cells.len() });
+            return Err(SchemaError::PayloadTooShort {
+                channel: Channel::Route,
+                needed: actions.len(),
+                got: cells.len(),
+            });
         }
         if pivots.len() > MAX_ROUTE_PIVOTS || actions.len() > MAX_ROUTE_LEN {
             self.status = RouteStatus::TooLong as u32;
@@ -187,7 +211,12 @@ impl RouteResponse {
             } else {
                 ("route actions", actions.len(), MAX_ROUTE_LEN)
             };
-            return Err(SchemaError::OutOfRange { channel: Channel::Route, what, value, max });
+            return Err(SchemaError::OutOfRange {
+                channel: Channel::Route,
+                what,
+                value,
+                max,
+            });
         }
         self.pivots[..pivots.len()].copy_from_slice(pivots);
         self.cells[..cells.len()].copy_from_slice(cells);
@@ -204,7 +233,10 @@ impl RouteResponse {
         if self.request_id != request.request_id {
             return Err(SchemaError::Incompatible {
                 channel: Channel::Route,
-                reason: format!("response to request {} received for request {}", self.request_id, request.request_id),
+                reason: format!(
+                    "response to request {} received for request {}",
+                    self.request_id, request.request_id
+                ),
                 wire: String::new(),
             });
         }
@@ -226,7 +258,8 @@ mod tests {
     fn fill_and_read() {
         let req = RouteRequest::new(5, 1, 0, 14, 0, 3);
         let mut r: Box<RouteResponse> = Box::new(RouteResponse::zeroed());
-        r.fill(&req, 2, RouteStatus::Ok, &[0, 3], &[15, 16, 16], &[2, 2, 1]).unwrap();
+        r.fill(&req, 2, RouteStatus::Ok, &[0, 3], &[15, 16, 16], &[2, 2, 1])
+            .unwrap();
         r.check(&req).unwrap();
         assert_eq!(r.status(), Some(RouteStatus::Ok));
         assert_eq!(r.pivots(), &[0, 3]);
@@ -236,7 +269,10 @@ mod tests {
 
         let long = vec![2u8; MAX_ROUTE_LEN + 1];
         let cells = vec![0u32; MAX_ROUTE_LEN + 1];
-        assert!(r.fill(&req, 2, RouteStatus::Ok, &[0], &cells, &long).is_err());
+        assert!(
+            r.fill(&req, 2, RouteStatus::Ok, &[0], &cells, &long)
+                .is_err()
+        );
         assert_eq!(r.status(), Some(RouteStatus::TooLong));
         assert_eq!(r.total_weight(), UNREACHABLE);
         assert!(r.actions().is_empty());

@@ -107,7 +107,10 @@ pub(crate) fn type_name_of<T: ZeroCopySend + ?Sized>() -> String {
 /// processes on one machine, so `now - header.send_time_ns` is a one-way
 /// latency.
 pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
     // SAFETY: `ts` is a valid, writable `timespec`; CLOCK_MONOTONIC is always
     // supported on Linux, so the call only writes `ts`.
     let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };

@@ -139,6 +139,15 @@ pub const GRAPH_MAX_SUBSCRIBERS: usize = 4;
 /// Graph publisher: initial slice capacity in `u32` words (grows by powers of two).
 pub const GRAPH_INITIAL_WORDS: usize = 1 << 14;
 
+/// Port factory of `wg/<run>/obs`.
+pub type ObsService<S> = publish_subscribe::PortFactory<S, [u64], ObsHeader>;
+/// Port factory of `wg/<run>/act`.
+pub type ActService<S> = publish_subscribe::PortFactory<S, [u8], ActHeader>;
+/// Port factory of `wg/<run>/route`.
+pub type RouteService<S> = request_response::PortFactory<S, RouteRequest, (), RouteResponse, ()>;
+/// Port factory of `wg/<run>/graph`.
+pub type GraphService<S> = publish_subscribe::PortFactory<S, [u32], GraphHeader>;
+
 // ---------------------------------------------------------------- names
 
 /// A run's name: `1..=64` characters from `[A-Za-z0-9_.-]`, not starting
@@ -152,14 +161,21 @@ impl RunName {
 
     /// Checks and wraps `name`.
     pub fn new(name: &str) -> Result<RunName, ShmError> {
-        let bad = |reason: &str| ShmError::InvalidName { what: "run name", value: name.to_owned(), reason: reason.to_owned() };
+        let bad = |reason: &str| ShmError::InvalidName {
+            what: "run name",
+            value: name.to_owned(),
+            reason: reason.to_owned(),
+        };
         if name.is_empty() || name.len() > Self::MAX_LEN {
             return Err(bad("must have 1 to 64 characters"));
         }
         if name.starts_with('.') {
             return Err(bad("must not start with '.'"));
         }
-        if !name.bytes().all(|b| b.is_ascii_alphanumeric() || b"_.-".contains(&b)) {
+        if !name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"_.-".contains(&b))
+        {
             return Err(bad("only letters, digits, '_', '.' and '-' are allowed"));
         }
         Ok(RunName(name.to_owned()))
@@ -172,7 +188,9 @@ impl RunName {
 
     /// The run id written into every header: FNV-1a (64 bit) of the name.
     pub fn id(&self) -> u64 {
-        self.0.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+        self.0.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+            (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+        })
     }
 
     /// The run's iceoryx2 prefix, `wg_<name>_`.
@@ -195,7 +213,11 @@ pub fn service_name_str(run: &RunName, channel: Channel) -> String {
 /// `wg/<run>/<channel>` as an iceoryx2 service name.
 pub fn service_name(run: &RunName, channel: Channel) -> Result<ServiceName, ShmError> {
     let s = service_name_str(run, channel);
-    ServiceName::new(&s).map_err(|e| ShmError::InvalidName { what: "service name", value: s, reason: format!("{e:?}") })
+    ServiceName::new(&s).map_err(|e| ShmError::InvalidName {
+        what: "service name",
+        value: s,
+        reason: format!("{e:?}"),
+    })
 }
 
 // ---------------------------------------------------------------- config and nodes
@@ -204,8 +226,11 @@ pub fn service_name(run: &RunName, channel: Channel) -> Result<ServiceName, ShmE
 /// given file prefix: what isolates one run, or one test, from the others.
 pub fn isolated_config(prefix: &str) -> Result<Config, ShmError> {
     let mut config = Config::default();
-    config.global.prefix = FileName::new(prefix.as_bytes())
-        .map_err(|e| ShmError::InvalidName { what: "iceoryx2 prefix", value: prefix.to_owned(), reason: format!("{e:?}") })?;
+    config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| ShmError::InvalidName {
+        what: "iceoryx2 prefix",
+        value: prefix.to_owned(),
+        reason: format!("{e:?}"),
+    })?;
     Ok(config)
 }
 
@@ -223,14 +248,21 @@ pub fn config_prefix(config: &Config) -> String {
 /// and SIGTERM), then tightens the permissions of the prefix's
 /// `global_mgmt` segment ([`harden_shm_permissions`]).
 pub fn create_node<S: Service>(config: &Config, name: &str) -> Result<Node<S>, ShmError> {
-    let node_name = NodeName::new(name)
-        .map_err(|e| ShmError::InvalidName { what: "node name", value: name.to_owned(), reason: format!("{e:?}") })?;
+    let node_name = NodeName::new(name).map_err(|e| ShmError::InvalidName {
+        what: "node name",
+        value: name.to_owned(),
+        reason: format!("{e:?}"),
+    })?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<S>()
-        .map_err(|e| ShmError::Ipc { op: "create node", service: name.to_owned(), detail: format!("{e:?}") })?;
+        .map_err(|e| ShmError::Ipc {
+            op: "create node",
+            service: name.to_owned(),
+            detail: format!("{e:?}"),
+        })?;
     harden_shm_permissions(&config_prefix(config))?;
     Ok(node)
 }
@@ -248,7 +280,13 @@ pub fn harden_shm_permissions(prefix: &str) -> Result<Vec<PathBuf>, ShmError> {
                 Ok(()) => changed.push(path),
                 // Removed meanwhile by a peer's cleanup: nothing to protect.
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(source) => return Err(ShmError::Io { op: "chmod", path, source }),
+                Err(source) => {
+                    return Err(ShmError::Io {
+                        op: "chmod",
+                        path,
+                        source,
+                    });
+                }
             }
         }
     }
@@ -262,7 +300,11 @@ pub fn shm_files(prefix: &str) -> Result<Vec<(PathBuf, u32)>, ShmError> {
 
 fn files_with_prefix(dir: &StdPath, prefix: &str) -> Result<Vec<(PathBuf, u32)>, ShmError> {
     use std::os::unix::fs::PermissionsExt;
-    let entries = std::fs::read_dir(dir).map_err(|source| ShmError::Io { op: "list", path: dir.to_owned(), source })?;
+    let entries = std::fs::read_dir(dir).map_err(|source| ShmError::Io {
+        op: "list",
+        path: dir.to_owned(),
+        source,
+    })?;
     let mut out = Vec::new();
     for entry in entries.flatten() {
         let name = entry.file_name();
@@ -300,28 +342,49 @@ pub fn list_nodes<S: Service>(config: &Config) -> Result<Vec<NodeSummary>, ShmEr
         let (view_details, alive) = match &state {
             NodeState::Alive(v) => (v.details().clone(), true),
             NodeState::Dead(v) => (v.details().clone(), false),
-            NodeState::Inaccessible(_) | NodeState::Undefined(_) => return CallbackProgression::Continue,
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => {
+                return CallbackProgression::Continue;
+            }
         };
         let (name, pid, executable) = match view_details {
-            Some(d) => (d.name().to_string(), d.process_id().value() as i64, d.executable().to_string()),
+            Some(d) => (
+                d.name().to_string(),
+                d.process_id().value() as i64,
+                d.executable().to_string(),
+            ),
             None => (String::new(), -1, String::new()),
         };
-        out.push(NodeSummary { name, pid, executable, alive });
+        out.push(NodeSummary {
+            name,
+            pid,
+            executable,
+            alive,
+        });
         CallbackProgression::Continue
     })
-    .map_err(|e| ShmError::Ipc { op: "list nodes", service: config_prefix(config), detail: format!("{e:?}") })?;
+    .map_err(|e| ShmError::Ipc {
+        op: "list nodes",
+        service: config_prefix(config),
+        detail: format!("{e:?}"),
+    })?;
     Ok(out)
 }
 
 /// The dead nodes under `config`'s prefix (a crashed or killed process).
 pub fn list_dead_nodes<S: Service>(config: &Config) -> Result<Vec<NodeSummary>, ShmError> {
-    Ok(list_nodes::<S>(config)?.into_iter().filter(|n| !n.alive).collect())
+    Ok(list_nodes::<S>(config)?
+        .into_iter()
+        .filter(|n| !n.alive)
+        .collect())
 }
 
 /// Removes the stale resources of every dead node under `config`'s prefix
 /// (what a start-up should do after a killed run). Waits up to `timeout`
 /// per node for a concurrent cleaner.
-pub fn cleanup_dead_nodes<S: Service>(config: &Config, timeout: Duration) -> Result<CleanupState, ShmError> {
+pub fn cleanup_dead_nodes<S: Service>(
+    config: &Config,
+    timeout: Duration,
+) -> Result<CleanupState, ShmError> {
     let mut dead = Vec::new();
     Node::<S>::list(config, |state| {
         if let NodeState::Dead(view) = state {
@@ -329,8 +392,15 @@ pub fn cleanup_dead_nodes<S: Service>(config: &Config, timeout: Duration) -> Res
         }
         CallbackProgression::Continue
     })
-    .map_err(|e| ShmError::Ipc { op: "list nodes", service: config_prefix(config), detail: format!("{e:?}") })?;
-    let mut state = CleanupState { cleanups: 0, failed_cleanups: 0 };
+    .map_err(|e| ShmError::Ipc {
+        op: "list nodes",
+        service: config_prefix(config),
+        detail: format!("{e:?}"),
+    })?;
+    let mut state = CleanupState {
+        cleanups: 0,
+        failed_cleanups: 0,
+    };
     for view in dead {
         match view.blocking_remove_stale_resources(timeout) {
             Ok(()) => state.cleanups += 1,
@@ -353,7 +423,13 @@ pub fn remove_global_mgmt(prefix: &str) -> Result<Vec<PathBuf>, ShmError> {
         match std::fs::remove_file(&path) {
             Ok(()) => removed.push(path),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(source) => return Err(ShmError::Io { op: "remove", path, source }),
+            Err(source) => {
+                return Err(ShmError::Io {
+                    op: "remove",
+                    path,
+                    source,
+                });
+            }
         }
     }
     Ok(removed)
@@ -441,7 +517,9 @@ fn classify_rr(e: &RrError) -> Class {
             | RrOpen::DoesNotSupportRequestedAmountOfServers
             | RrOpen::DoesNotSupportRequestedAmountOfClients
             | RrOpen::DoesNotSupportRequestedAmountOfNodes
-            | RrOpen::DoesNotSupportRequestedAmountOfBorrowedResponsesPerPendingResponse => Class::Incompatible,
+            | RrOpen::DoesNotSupportRequestedAmountOfBorrowedResponsesPerPendingResponse => {
+                Class::Incompatible
+            }
             _ => Class::Fatal,
         },
         RrError::RequestResponseCreateError(c) => match c {
@@ -481,7 +559,11 @@ impl PortCreateError for ClientCreateError {
 }
 
 fn classify_port<E: PortCreateError>(e: &E) -> Class {
-    if e.table_full() { Class::Cleanup } else { Class::Fatal }
+    if e.table_full() {
+        Class::Cleanup
+    } else {
+        Class::Fatal
+    }
 }
 
 /// What this process expects of a service, for diagnosing a refusal.
@@ -506,7 +588,11 @@ impl Expectation {
 }
 
 fn attr_error(value: &str, e: impl Debug) -> ShmError {
-    ShmError::InvalidName { what: "service attribute", value: value.to_owned(), reason: format!("{e:?}") }
+    ShmError::InvalidName {
+        what: "service attribute",
+        value: value.to_owned(),
+        reason: format!("{e:?}"),
+    }
 }
 
 /// Splits `"wg.ObsHeader.v3"` into `("wg.ObsHeader", 3)`.
@@ -521,58 +607,135 @@ fn parse_grid(v: &str) -> Option<(u16, u16)> {
 }
 
 /// Reads the existing service's description and names the difference.
-fn diagnose<S: Service>(config: &Config, name: &ServiceName, pattern: MessagingPattern, exp: &Expectation, reason: String) -> SchemaError {
+fn diagnose<S: Service>(
+    config: &Config,
+    name: &ServiceName,
+    pattern: MessagingPattern,
+    exp: &Expectation,
+    reason: String,
+) -> SchemaError {
     let channel = exp.channel;
     let details = match S::details(name, config, pattern) {
         Ok(Some(d)) => d,
         other => {
-            return SchemaError::Incompatible { channel, reason, wire: format!("service description unavailable ({other:?})") };
+            return SchemaError::Incompatible {
+                channel,
+                reason,
+                wire: format!("service description unavailable ({other:?})"),
+            };
         }
     };
     let wire_types: Vec<(&'static str, String)> = match details.static_details.messaging_pattern() {
         StaticPattern::PublishSubscribe(ps) => {
-            vec![("user header", ps.message_type_details().user_header.type_name().to_string())]
+            vec![(
+                "user header",
+                ps.message_type_details()
+                    .user_header
+                    .type_name()
+                    .to_string(),
+            )]
         }
         StaticPattern::RequestResponse(rr) => vec![
-            ("request", rr.request_message_type_details().payload.type_name().to_string()),
-            ("response", rr.response_message_type_details().payload.type_name().to_string()),
+            (
+                "request",
+                rr.request_message_type_details()
+                    .payload
+                    .type_name()
+                    .to_string(),
+            ),
+            (
+                "response",
+                rr.response_message_type_details()
+                    .payload
+                    .type_name()
+                    .to_string(),
+            ),
         ],
         _ => Vec::new(),
     };
-    let wire_attrs: Vec<(String, String)> =
-        details.static_details.attributes().iter().map(|a| (a.key().to_string(), a.value().to_string())).collect();
+    let wire_attrs: Vec<(String, String)> = details
+        .static_details
+        .attributes()
+        .iter()
+        .map(|a| (a.key().to_string(), a.value().to_string()))
+        .collect();
 
     for (role, ours) in &exp.types {
-        let Some((_, wire)) = wire_types.iter().find(|(r, _)| r == role) else { continue };
+        let Some((_, wire)) = wire_types.iter().find(|(r, _)| r == role) else {
+            continue;
+        };
         if wire == ours {
             continue;
         }
         return match (split_version(wire), split_version(ours)) {
-            (Some((wb, wv)), Some((ob, ov))) if wb == ob => SchemaError::SchemaVersion { channel, wire: wv, ours: ov },
-            _ => SchemaError::WireType { channel, wire: wire.clone(), ours: ours.clone() },
+            (Some((wb, wv)), Some((ob, ov))) if wb == ob => SchemaError::SchemaVersion {
+                channel,
+                wire: wv,
+                ours: ov,
+            },
+            _ => SchemaError::WireType {
+                channel,
+                wire: wire.clone(),
+                ours: ours.clone(),
+            },
         };
     }
     for (key, ours) in &exp.attrs {
-        let wire = wire_attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str());
+        let wire = wire_attrs
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str());
         let Some(wire) = wire else {
-            return SchemaError::Incompatible { channel, reason: format!("{reason}: attribute {key} missing on the wire"), wire: format!("{wire_attrs:?}") };
+            return SchemaError::Incompatible {
+                channel,
+                reason: format!("{reason}: attribute {key} missing on the wire"),
+                wire: format!("{wire_attrs:?}"),
+            };
         };
         if wire == ours {
             continue;
         }
-        let mismatch = match *key {
-            ATTR_SCHEMA_VERSION => wire.parse().ok().zip(ours.parse().ok()).map(|(w, o)| SchemaError::SchemaVersion { channel, wire: w, ours: o }),
-            ATTR_GRID => parse_grid(wire).zip(parse_grid(ours)).map(|(w, o)| SchemaError::GridShape { channel, expected: o, wire: w }),
-            ATTR_NUM_ENVS => wire.parse().ok().zip(ours.parse().ok()).map(|(w, o)| SchemaError::BatchSize { channel, expected: o, wire: w }),
-            _ => None,
-        };
+        let mismatch =
+            match *key {
+                ATTR_SCHEMA_VERSION => wire.parse().ok().zip(ours.parse().ok()).map(|(w, o)| {
+                    SchemaError::SchemaVersion {
+                        channel,
+                        wire: w,
+                        ours: o,
+                    }
+                }),
+                ATTR_GRID => {
+                    parse_grid(wire)
+                        .zip(parse_grid(ours))
+                        .map(|(w, o)| SchemaError::GridShape {
+                            channel,
+                            expected: o,
+                            wire: w,
+                        })
+                }
+                ATTR_NUM_ENVS => {
+                    wire.parse()
+                        .ok()
+                        .zip(ours.parse().ok())
+                        .map(|(w, o)| SchemaError::BatchSize {
+                            channel,
+                            expected: o,
+                            wire: w,
+                        })
+                }
+                _ => None,
+            };
         return mismatch.unwrap_or_else(|| SchemaError::Incompatible {
             channel,
             reason: format!("{reason}: attribute {key} = {wire:?}, expected {ours:?}"),
             wire: format!("{wire_attrs:?}"),
         });
     }
-    SchemaError::Incompatible { channel, reason, wire: format!("types {wire_types:?}, attributes {wire_attrs:?}") }
+    SchemaError::Incompatible {
+        channel,
+        reason,
+        wire: format!("types {wire_types:?}, attributes {wire_attrs:?}"),
+    }
 }
 
 // ---------------------------------------------------------------- the node
@@ -590,8 +753,16 @@ pub struct PipelineNode<S: Service> {
 
 impl<S: Service> PipelineNode<S> {
     /// Creates the node `node_name` for `run` under `config` (see [`create_node`]).
-    pub fn new(config: &Config, run: RunName, node_name: &str) -> Result<PipelineNode<S>, ShmError> {
-        Ok(PipelineNode { node: create_node(config, node_name)?, run, retry_timeout: DEFAULT_RETRY_TIMEOUT })
+    pub fn new(
+        config: &Config,
+        run: RunName,
+        node_name: &str,
+    ) -> Result<PipelineNode<S>, ShmError> {
+        Ok(PipelineNode {
+            node: create_node(config, node_name)?,
+            run,
+            retry_timeout: DEFAULT_RETRY_TIMEOUT,
+        })
     }
 
     /// Sets how long transient errors are retried (default [`DEFAULT_RETRY_TIMEOUT`]).
@@ -617,7 +788,13 @@ impl<S: Service> PipelineNode<S> {
 
     /// Runs `f` until it succeeds, a non-transient error occurs, or the retry
     /// budget is spent; back-off doubles from 1 ms to 64 ms.
-    fn retry<T, E: Debug>(&self, op: &'static str, service: &str, mut f: impl FnMut() -> Result<T, E>, classify: impl Fn(&E) -> Class) -> Result<T, Result<(E, Class), ShmError>> {
+    fn retry<T, E: Debug>(
+        &self,
+        op: &'static str,
+        service: &str,
+        mut f: impl FnMut() -> Result<T, E>,
+        classify: impl Fn(&E) -> Class,
+    ) -> Result<T, Result<(E, Class), ShmError>> {
         let start = Instant::now();
         let mut delay = Duration::from_millis(1);
         loop {
@@ -634,31 +811,58 @@ impl<S: Service> PipelineNode<S> {
                 Class::Incompatible | Class::Fatal => return Err(Ok((e, class))),
             }
             if start.elapsed() >= self.retry_timeout {
-                return Err(Err(ShmError::Timeout { op, service: service.to_owned(), waited: start.elapsed(), last: format!("{e:?}") }));
+                return Err(Err(ShmError::Timeout {
+                    op,
+                    service: service.to_owned(),
+                    waited: start.elapsed(),
+                    last: format!("{e:?}"),
+                }));
             }
             std::thread::sleep(delay);
             delay = (delay * 2).min(Duration::from_millis(64));
         }
     }
 
-    fn open_failed<E: Debug>(&self, name: &ServiceName, pattern: MessagingPattern, exp: &Expectation, fail: Result<(E, Class), ShmError>) -> ShmError {
+    fn open_failed<E: Debug>(
+        &self,
+        name: &ServiceName,
+        pattern: MessagingPattern,
+        exp: &Expectation,
+        fail: Result<(E, Class), ShmError>,
+    ) -> ShmError {
         match fail {
-            Ok((e, Class::Incompatible)) => diagnose::<S>(self.node.config(), name, pattern, exp, format!("{e:?}")).into(),
-            Ok((e, _)) => ShmError::Ipc { op: "open service", service: name.to_string(), detail: format!("{e:?}") },
+            Ok((e, Class::Incompatible)) => {
+                diagnose::<S>(self.node.config(), name, pattern, exp, format!("{e:?}")).into()
+            }
+            Ok((e, _)) => ShmError::Ipc {
+                op: "open service",
+                service: name.to_string(),
+                detail: format!("{e:?}"),
+            },
             Err(e) => e,
         }
     }
 
-    fn create_port<T, E: PortCreateError>(&self, op: &'static str, name: &ServiceName, f: impl FnMut() -> Result<T, E>) -> Result<T, ShmError> {
-        self.retry(op, name.as_str(), f, classify_port).map_err(|fail| match fail {
-            Ok((e, _)) => ShmError::Ipc { op, service: name.to_string(), detail: format!("{e:?}") },
-            Err(e) => e,
-        })
+    fn create_port<T, E: PortCreateError>(
+        &self,
+        op: &'static str,
+        name: &ServiceName,
+        f: impl FnMut() -> Result<T, E>,
+    ) -> Result<T, ShmError> {
+        self.retry(op, name.as_str(), f, classify_port)
+            .map_err(|fail| match fail {
+                Ok((e, _)) => ShmError::Ipc {
+                    op,
+                    service: name.to_string(),
+                    detail: format!("{e:?}"),
+                },
+                Err(e) => e,
+            })
     }
 
     // ------------------------------------------------------------ obs
 
-    fn obs_service(&self, shape: &ObsShape) -> Result<(ServiceName, publish_subscribe::PortFactory<S, [u64], ObsHeader>), ShmError> {
+    fn obs_service(&self, shape: &ObsShape) -> Result<(ServiceName, ObsService<S>), ShmError> {
         let name = service_name(&self.run, Channel::Obs)?;
         let exp = Expectation {
             channel: Channel::Obs,
@@ -705,7 +909,12 @@ impl<S: Service> PipelineNode<S> {
                 .create()
                 .map_err(|e: PublisherCreateError| e)
         })?;
-        let publisher = ObsPublisher { publisher, _service: service, shape, run_id: self.run.id() };
+        let publisher = ObsPublisher {
+            publisher,
+            _service: service,
+            shape,
+            run_id: self.run.id(),
+        };
         publisher.update_connections()?;
         Ok(publisher)
     }
@@ -714,19 +923,31 @@ impl<S: Service> PipelineNode<S> {
     pub fn obs_subscriber(&self, shape: ObsShape) -> Result<ObsSubscriber<S>, ShmError> {
         let (name, service) = self.obs_service(&shape)?;
         let subscriber = self.create_port("create subscriber", &name, || {
-            service.subscriber_builder().buffer_size(OBS_BUFFER).create().map_err(|e: SubscriberCreateError| e)
+            service
+                .subscriber_builder()
+                .buffer_size(OBS_BUFFER)
+                .create()
+                .map_err(|e: SubscriberCreateError| e)
         })?;
-        Ok(ObsSubscriber { subscriber, _service: service, shape, run_id: self.run.id() })
+        Ok(ObsSubscriber {
+            subscriber,
+            _service: service,
+            shape,
+            run_id: self.run.id(),
+        })
     }
 
     // ------------------------------------------------------------ act
 
-    fn act_service(&self, num_envs: u32) -> Result<(ServiceName, publish_subscribe::PortFactory<S, [u8], ActHeader>), ShmError> {
+    fn act_service(&self, num_envs: u32) -> Result<(ServiceName, ActService<S>), ShmError> {
         let name = service_name(&self.run, Channel::Act)?;
         let exp = Expectation {
             channel: Channel::Act,
             types: vec![("user header", type_name_of::<ActHeader>())],
-            attrs: vec![(ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string()), (ATTR_NUM_ENVS, num_envs.to_string())],
+            attrs: vec![
+                (ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string()),
+                (ATTR_NUM_ENVS, num_envs.to_string()),
+            ],
         };
         let verifier = exp.verifier()?;
         let factory = self
@@ -765,7 +986,12 @@ impl<S: Service> PipelineNode<S> {
                 .create()
                 .map_err(|e: PublisherCreateError| e)
         })?;
-        let publisher = ActPublisher { publisher, _service: service, num_envs: n, run_id: self.run.id() };
+        let publisher = ActPublisher {
+            publisher,
+            _service: service,
+            num_envs: n,
+            run_id: self.run.id(),
+        };
         publisher.update_connections()?;
         Ok(publisher)
     }
@@ -775,18 +1001,30 @@ impl<S: Service> PipelineNode<S> {
         let n = check_num_envs(num_envs)?;
         let (name, service) = self.act_service(n)?;
         let subscriber = self.create_port("create subscriber", &name, || {
-            service.subscriber_builder().buffer_size(ACT_BUFFER).create().map_err(|e: SubscriberCreateError| e)
+            service
+                .subscriber_builder()
+                .buffer_size(ACT_BUFFER)
+                .create()
+                .map_err(|e: SubscriberCreateError| e)
         })?;
-        Ok(ActSubscriber { subscriber, _service: service, num_envs: n, run_id: self.run.id() })
+        Ok(ActSubscriber {
+            subscriber,
+            _service: service,
+            num_envs: n,
+            run_id: self.run.id(),
+        })
     }
 
     // ------------------------------------------------------------ route
 
-    fn route_service(&self) -> Result<(ServiceName, request_response::PortFactory<S, RouteRequest, (), RouteResponse, ()>), ShmError> {
+    fn route_service(&self) -> Result<(ServiceName, RouteService<S>), ShmError> {
         let name = service_name(&self.run, Channel::Route)?;
         let exp = Expectation {
             channel: Channel::Route,
-            types: vec![("request", type_name_of::<RouteRequest>()), ("response", type_name_of::<RouteResponse>())],
+            types: vec![
+                ("request", type_name_of::<RouteRequest>()),
+                ("response", type_name_of::<RouteResponse>()),
+            ],
             attrs: vec![(ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string())],
         };
         let verifier = exp.verifier()?;
@@ -816,28 +1054,50 @@ impl<S: Service> PipelineNode<S> {
     pub fn route_server(&self) -> Result<RouteServer<S>, ShmError> {
         let (name, service) = self.route_service()?;
         let server = self.create_port("create server", &name, || {
-            service.server_builder().create().map_err(|e: ServerCreateError| e)
+            service
+                .server_builder()
+                .create()
+                .map_err(|e: ServerCreateError| e)
         })?;
-        Ok(RouteServer { server, _service: service, run_id: self.run.id() })
+        Ok(RouteServer {
+            server,
+            _service: service,
+            run_id: self.run.id(),
+        })
     }
 
     /// A client of `wg/<run>/route` (the learner).
     pub fn route_client(&self) -> Result<RouteClient<S>, ShmError> {
         let (name, service) = self.route_service()?;
         let client = self.create_port("create client", &name, || {
-            service.client_builder().create().map_err(|e: ClientCreateError| e)
+            service
+                .client_builder()
+                .create()
+                .map_err(|e: ClientCreateError| e)
         })?;
-        Ok(RouteClient { client, _service: service, run_id: self.run.id(), next_id: Cell::new(1) })
+        Ok(RouteClient {
+            client,
+            _service: service,
+            run_id: self.run.id(),
+            next_id: Cell::new(1),
+        })
     }
 
     // ------------------------------------------------------------ graph
 
-    fn graph_service(&self, width: u16, height: u16) -> Result<(ServiceName, publish_subscribe::PortFactory<S, [u32], GraphHeader>), ShmError> {
+    fn graph_service(
+        &self,
+        width: u16,
+        height: u16,
+    ) -> Result<(ServiceName, GraphService<S>), ShmError> {
         let name = service_name(&self.run, Channel::Graph)?;
         let exp = Expectation {
             channel: Channel::Graph,
             types: vec![("user header", type_name_of::<GraphHeader>())],
-            attrs: vec![(ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string()), (ATTR_GRID, format!("{width}x{height}"))],
+            attrs: vec![
+                (ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string()),
+                (ATTR_GRID, format!("{width}x{height}")),
+            ],
         };
         let verifier = exp.verifier()?;
         let factory = self
@@ -864,7 +1124,11 @@ impl<S: Service> PipelineNode<S> {
     }
 
     /// The planner's end of `wg/<run>/graph` for a `width × height` maze.
-    pub fn graph_publisher(&self, width: usize, height: usize) -> Result<GraphPublisher<S>, ShmError> {
+    pub fn graph_publisher(
+        &self,
+        width: usize,
+        height: usize,
+    ) -> Result<GraphPublisher<S>, ShmError> {
         let (w, h) = check_grid(Channel::Graph, width, height)?;
         let (name, service) = self.graph_service(w, h)?;
         let publisher = self.create_port("create publisher", &name, || {
@@ -876,24 +1140,48 @@ impl<S: Service> PipelineNode<S> {
                 .create()
                 .map_err(|e: PublisherCreateError| e)
         })?;
-        Ok(GraphPublisher { publisher, _service: service, width: w, height: h, run_id: self.run.id() })
+        Ok(GraphPublisher {
+            publisher,
+            _service: service,
+            width: w,
+            height: h,
+            run_id: self.run.id(),
+        })
     }
 
     /// A reader of `wg/<run>/graph` (learner, viewers); gets the latest
     /// snapshot on joining, after the publisher's next send or
     /// `update_connections`.
-    pub fn graph_subscriber(&self, width: usize, height: usize) -> Result<GraphSubscriber<S>, ShmError> {
+    pub fn graph_subscriber(
+        &self,
+        width: usize,
+        height: usize,
+    ) -> Result<GraphSubscriber<S>, ShmError> {
         let (w, h) = check_grid(Channel::Graph, width, height)?;
         let (name, service) = self.graph_service(w, h)?;
         let subscriber = self.create_port("create subscriber", &name, || {
-            service.subscriber_builder().buffer_size(1).create().map_err(|e: SubscriberCreateError| e)
+            service
+                .subscriber_builder()
+                .buffer_size(1)
+                .create()
+                .map_err(|e: SubscriberCreateError| e)
         })?;
-        Ok(GraphSubscriber { subscriber, _service: service, width: w, height: h, run_id: self.run.id() })
+        Ok(GraphSubscriber {
+            subscriber,
+            _service: service,
+            width: w,
+            height: h,
+            run_id: self.run.id(),
+        })
     }
 }
 
 fn ipc_err(op: &'static str, channel: Channel, e: impl Debug) -> ShmError {
-    ShmError::Ipc { op, service: channel.suffix().to_owned(), detail: format!("{e:?}") }
+    ShmError::Ipc {
+        op,
+        service: channel.suffix().to_owned(),
+        detail: format!("{e:?}"),
+    }
 }
 
 // ---------------------------------------------------------------- obs ports
@@ -902,7 +1190,7 @@ fn ipc_err(op: &'static str, channel: Channel, e: impl Debug) -> ShmError {
 #[derive(Debug)]
 pub struct ObsPublisher<S: Service> {
     publisher: Publisher<S, [u64], ObsHeader>,
-    _service: publish_subscribe::PortFactory<S, [u64], ObsHeader>,
+    _service: ObsService<S>,
     shape: ObsShape,
     run_id: u64,
 }
@@ -917,18 +1205,32 @@ impl<S: Service> ObsPublisher<S> {
     /// filled, metas and cells are stale and must all be written (debug
     /// builds fill them with [`crate::SENTINEL_BYTE`]).
     pub fn loan(&self, seq: u64, step: u64) -> Result<ObsSampleMut<S>, ShmError> {
-        let uninit = self.publisher.loan_slice_uninit(self.shape.payload_words()).map_err(|e| ipc_err("loan", Channel::Obs, e))?;
+        let uninit = self
+            .publisher
+            .loan_slice_uninit(self.shape.payload_words())
+            .map_err(|e| ipc_err("loan", Channel::Obs, e))?;
         let mut sample = assume_init_slice(uninit);
-        *sample.user_header_mut() = ObsHeader { seq, step, ..ObsHeader::new(&self.shape, self.run_id) };
+        *sample.user_header_mut() = ObsHeader {
+            seq,
+            step,
+            ..ObsHeader::new(&self.shape, self.run_id)
+        };
         if cfg!(debug_assertions) {
-            sample.payload_mut().fill(u64::from_ne_bytes([crate::SENTINEL_BYTE; 8]));
+            sample
+                .payload_mut()
+                .fill(u64::from_ne_bytes([crate::SENTINEL_BYTE; 8]));
         }
-        Ok(ObsSampleMut { sample, shape: self.shape })
+        Ok(ObsSampleMut {
+            sample,
+            shape: self.shape,
+        })
     }
 
     /// Connects subscribers that joined since the last send (delivers history).
     pub fn update_connections(&self) -> Result<(), ShmError> {
-        self.publisher.update_connections().map_err(|e| ipc_err("update connections", Channel::Obs, e))
+        self.publisher
+            .update_connections()
+            .map_err(|e| ipc_err("update connections", Channel::Obs, e))
     }
 }
 
@@ -944,7 +1246,8 @@ impl<S: Service> ObsSampleMut<S> {
     pub fn batch_mut(&mut self) -> ObsBatchMut<'_> {
         let shape = self.shape;
         let (header, payload) = split_slice_sample(&mut self.sample);
-        ObsBatchMut::new(header, payload, &shape).expect("invariant: the sample was loaned with the shape's length")
+        ObsBatchMut::new(header, payload, &shape)
+            .expect("invariant: the sample was loaned with the shape's length")
     }
 
     /// The header.
@@ -956,7 +1259,9 @@ impl<S: Service> ObsSampleMut<S> {
     /// subscribers reached.
     pub fn send(mut self) -> Result<usize, ShmError> {
         self.sample.user_header_mut().send_time_ns = monotonic_ns();
-        self.sample.send().map_err(|e| ipc_err("send", Channel::Obs, e))
+        self.sample
+            .send()
+            .map_err(|e| ipc_err("send", Channel::Obs, e))
     }
 }
 
@@ -964,7 +1269,7 @@ impl<S: Service> ObsSampleMut<S> {
 #[derive(Debug)]
 pub struct ObsSubscriber<S: Service> {
     subscriber: Subscriber<S, [u64], ObsHeader>,
-    _service: publish_subscribe::PortFactory<S, [u64], ObsHeader>,
+    _service: ObsService<S>,
     shape: ObsShape,
     run_id: u64,
 }
@@ -978,11 +1283,24 @@ impl<S: Service> ObsSubscriber<S> {
     /// The next batch, if any (non-blocking). A batch whose header does not
     /// match this process's shape, run or schema is an `Err` (and released).
     pub fn receive(&self) -> Result<Option<ObsSample<S>>, ShmError> {
-        let Some(sample) = self.subscriber.receive().map_err(|e| ipc_err("receive", Channel::Obs, e))? else {
+        let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(|e| ipc_err("receive", Channel::Obs, e))?
+        else {
             return Ok(None);
         };
-        ObsBatch::new(sample.user_header(), sample.payload(), &self.shape, self.run_id)?;
-        Ok(Some(ObsSample { sample, shape: self.shape, run_id: self.run_id }))
+        ObsBatch::new(
+            sample.user_header(),
+            sample.payload(),
+            &self.shape,
+            self.run_id,
+        )?;
+        Ok(Some(ObsSample {
+            sample,
+            shape: self.shape,
+            run_id: self.run_id,
+        }))
     }
 }
 
@@ -997,8 +1315,13 @@ pub struct ObsSample<S: Service> {
 impl<S: Service> ObsSample<S> {
     /// The batch: header, metas, cells, borrowed from shared memory.
     pub fn batch(&self) -> ObsBatch<'_> {
-        ObsBatch::new(self.sample.user_header(), self.sample.payload(), &self.shape, self.run_id)
-            .expect("invariant: checked in ObsSubscriber::receive")
+        ObsBatch::new(
+            self.sample.user_header(),
+            self.sample.payload(),
+            &self.shape,
+            self.run_id,
+        )
+        .expect("invariant: checked in ObsSubscriber::receive")
     }
 
     /// The header.
@@ -1018,7 +1341,7 @@ impl<S: Service> ObsSample<S> {
 #[derive(Debug)]
 pub struct ActPublisher<S: Service> {
     publisher: Publisher<S, [u8], ActHeader>,
-    _service: publish_subscribe::PortFactory<S, [u8], ActHeader>,
+    _service: ActService<S>,
     num_envs: u32,
     run_id: u64,
 }
@@ -1027,7 +1350,10 @@ impl<S: Service> ActPublisher<S> {
     /// Loans a sample answering observation batch `seq` (actions stale:
     /// write all `N`).
     pub fn loan(&self, seq: u64) -> Result<ActSampleMut<S>, ShmError> {
-        let uninit = self.publisher.loan_slice_uninit(self.num_envs as usize).map_err(|e| ipc_err("loan", Channel::Act, e))?;
+        let uninit = self
+            .publisher
+            .loan_slice_uninit(self.num_envs as usize)
+            .map_err(|e| ipc_err("loan", Channel::Act, e))?;
         let mut sample = assume_init_slice(uninit);
         *sample.user_header_mut() = ActHeader::new(self.num_envs, self.run_id, seq);
         Ok(ActSampleMut { sample })
@@ -1037,13 +1363,17 @@ impl<S: Service> ActPublisher<S> {
     pub fn send_actions(&self, seq: u64, actions: &[u8]) -> Result<usize, ShmError> {
         crate::step::check_len(Channel::Act, self.num_envs as usize, actions.len())?;
         let mut s = self.loan(seq)?;
-        s.batch_mut().actions.copy_from_slice(&actions[..self.num_envs as usize]);
+        s.batch_mut()
+            .actions
+            .copy_from_slice(&actions[..self.num_envs as usize]);
         s.send()
     }
 
     /// Connects subscribers that joined since the last send.
     pub fn update_connections(&self) -> Result<(), ShmError> {
-        self.publisher.update_connections().map_err(|e| ipc_err("update connections", Channel::Act, e))
+        self.publisher
+            .update_connections()
+            .map_err(|e| ipc_err("update connections", Channel::Act, e))
     }
 }
 
@@ -1063,7 +1393,9 @@ impl<S: Service> ActSampleMut<S> {
     /// Stamps `send_time_ns` and publishes.
     pub fn send(mut self) -> Result<usize, ShmError> {
         self.sample.user_header_mut().send_time_ns = monotonic_ns();
-        self.sample.send().map_err(|e| ipc_err("send", Channel::Act, e))
+        self.sample
+            .send()
+            .map_err(|e| ipc_err("send", Channel::Act, e))
     }
 }
 
@@ -1071,7 +1403,7 @@ impl<S: Service> ActSampleMut<S> {
 #[derive(Debug)]
 pub struct ActSubscriber<S: Service> {
     subscriber: Subscriber<S, [u8], ActHeader>,
-    _service: publish_subscribe::PortFactory<S, [u8], ActHeader>,
+    _service: ActService<S>,
     num_envs: u32,
     run_id: u64,
 }
@@ -1079,11 +1411,23 @@ pub struct ActSubscriber<S: Service> {
 impl<S: Service> ActSubscriber<S> {
     /// The next action batch, if any (checked like [`ObsSubscriber::receive`]).
     pub fn receive(&self) -> Result<Option<ActSample<S>>, ShmError> {
-        let Some(sample) = self.subscriber.receive().map_err(|e| ipc_err("receive", Channel::Act, e))? else {
+        let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(|e| ipc_err("receive", Channel::Act, e))?
+        else {
             return Ok(None);
         };
-        ActBatch::new(sample.user_header(), sample.payload(), self.num_envs, self.run_id)?;
-        Ok(Some(ActSample { sample, num_envs: self.num_envs }))
+        ActBatch::new(
+            sample.user_header(),
+            sample.payload(),
+            self.num_envs,
+            self.run_id,
+        )?;
+        Ok(Some(ActSample {
+            sample,
+            num_envs: self.num_envs,
+        }))
     }
 }
 
@@ -1111,7 +1455,7 @@ impl<S: Service> ActSample<S> {
 #[derive(Debug)]
 pub struct RouteServer<S: Service> {
     server: Server<S, RouteRequest, (), RouteResponse, ()>,
-    _service: request_response::PortFactory<S, RouteRequest, (), RouteResponse, ()>,
+    _service: RouteService<S>,
     run_id: u64,
 }
 
@@ -1119,7 +1463,11 @@ impl<S: Service> RouteServer<S> {
     /// The next request, if any. A request of another schema version or run
     /// is answered with [`RouteStatus::BadRequest`] here and reported as `Err`.
     pub fn receive(&self) -> Result<Option<RouteCall<S>>, ShmError> {
-        let Some(active) = self.server.receive().map_err(|e| ipc_err("receive", Channel::Route, e))? else {
+        let Some(active) = self
+            .server
+            .receive()
+            .map_err(|e| ipc_err("receive", Channel::Route, e))?
+        else {
             return Ok(None);
         };
         let call = RouteCall { active };
@@ -1151,13 +1499,31 @@ impl<S: Service> RouteCall<S> {
     /// Writes the answer in place in shared memory and sends it. Returns
     /// the status actually sent: [`RouteStatus::TooLong`] when the route
     /// does not fit [`crate::MAX_ROUTE_LEN`] / [`crate::MAX_ROUTE_PIVOTS`].
-    pub fn respond(self, graph_version: u64, status: RouteStatus, pivots: &[u16], cells: &[u32], actions: &[u8]) -> Result<RouteStatus, ShmError> {
+    pub fn respond(
+        self,
+        graph_version: u64,
+        status: RouteStatus,
+        pivots: &[u16],
+        cells: &[u32],
+        actions: &[u8],
+    ) -> Result<RouteStatus, ShmError> {
         let request = *self.request();
-        let uninit = self.active.loan_uninit().map_err(|e| ipc_err("loan response", Channel::Route, e))?;
+        let uninit = self
+            .active
+            .loan_uninit()
+            .map_err(|e| ipc_err("loan response", Channel::Route, e))?;
         let mut response = assume_init_response(uninit);
-        let filled = response.payload_mut().fill(&request, graph_version, status, pivots, cells, actions);
-        let sent = response.payload().status().unwrap_or(RouteStatus::BadRequest);
-        response.send().map_err(|e| ipc_err("send response", Channel::Route, e))?;
+        let filled =
+            response
+                .payload_mut()
+                .fill(&request, graph_version, status, pivots, cells, actions);
+        let sent = response
+            .payload()
+            .status()
+            .unwrap_or(RouteStatus::BadRequest);
+        response
+            .send()
+            .map_err(|e| ipc_err("send response", Channel::Route, e))?;
         match filled {
             Ok(()) => Ok(sent),
             Err(SchemaError::OutOfRange { .. }) => Ok(RouteStatus::TooLong),
@@ -1170,7 +1536,7 @@ impl<S: Service> RouteCall<S> {
 #[derive(Debug)]
 pub struct RouteClient<S: Service> {
     client: Client<S, RouteRequest, (), RouteResponse, ()>,
-    _service: request_response::PortFactory<S, RouteRequest, (), RouteResponse, ()>,
+    _service: RouteService<S>,
     run_id: u64,
     next_id: Cell<u64>,
 }
@@ -1178,11 +1544,20 @@ pub struct RouteClient<S: Service> {
 impl<S: Service> RouteClient<S> {
     /// Sends a request for a route from `from_cell` facing `from_dir` to
     /// pivotal state `to_pivot`, on behalf of environment `env`.
-    pub fn request(&self, env: u32, from_cell: u32, from_dir: u8, to_pivot: u16) -> Result<PendingRoute<S>, ShmError> {
+    pub fn request(
+        &self,
+        env: u32,
+        from_cell: u32,
+        from_dir: u8,
+        to_pivot: u16,
+    ) -> Result<PendingRoute<S>, ShmError> {
         let id = self.next_id.get();
         self.next_id.set(id + 1);
         let request = RouteRequest::new(id, self.run_id, env, from_cell, from_dir, to_pivot);
-        let pending = self.client.send_copy(request).map_err(|e| ipc_err("send request", Channel::Route, e))?;
+        let pending = self
+            .client
+            .send_copy(request)
+            .map_err(|e| ipc_err("send request", Channel::Route, e))?;
         Ok(PendingRoute { pending, request })
     }
 }
@@ -1207,7 +1582,11 @@ impl<S: Service> PendingRoute<S> {
 
     /// The answer, if it arrived (non-blocking); checked against the request.
     pub fn try_receive(&self) -> Result<Option<RouteReply<S>>, ShmError> {
-        let Some(response) = self.pending.receive().map_err(|e| ipc_err("receive response", Channel::Route, e))? else {
+        let Some(response) = self
+            .pending
+            .receive()
+            .map_err(|e| ipc_err("receive response", Channel::Route, e))?
+        else {
             return Ok(None);
         };
         response.payload().check(&self.request)?;
@@ -1228,10 +1607,19 @@ impl<S: Service> PendingRoute<S> {
                 if let Some(reply) = self.try_receive()? {
                     return Ok(reply);
                 }
-                return Err(ShmError::Ipc { op: "wait for route", service: Channel::Route.suffix().to_owned(), detail: "server dropped the request".into() });
+                return Err(ShmError::Ipc {
+                    op: "wait for route",
+                    service: Channel::Route.suffix().to_owned(),
+                    detail: "server dropped the request".into(),
+                });
             }
             if start.elapsed() >= timeout {
-                return Err(ShmError::Timeout { op: "wait for route", service: Channel::Route.suffix().to_owned(), waited: start.elapsed(), last: "no response".into() });
+                return Err(ShmError::Timeout {
+                    op: "wait for route",
+                    service: Channel::Route.suffix().to_owned(),
+                    waited: start.elapsed(),
+                    last: "no response".into(),
+                });
             }
             spins += 1;
             if spins > 1000 {
@@ -1269,7 +1657,7 @@ impl<S: Service> std::ops::Deref for RouteReply<S> {
 #[derive(Debug)]
 pub struct GraphPublisher<S: Service> {
     publisher: Publisher<S, [u32], GraphHeader>,
-    _service: publish_subscribe::PortFactory<S, [u32], GraphHeader>,
+    _service: GraphService<S>,
     width: u16,
     height: u16,
     run_id: u64,
@@ -1280,15 +1668,31 @@ impl<S: Service> GraphPublisher<S> {
     pub fn loan(&self, num_nodes: usize, num_edges: usize) -> Result<GraphSampleMut<S>, ShmError> {
         check_counts(num_nodes, num_edges)?;
         let words = GraphHeader::payload_words(num_nodes, num_edges);
-        let uninit = self.publisher.loan_slice_uninit(words).map_err(|e| ipc_err("loan", Channel::Graph, e))?;
+        let uninit = self
+            .publisher
+            .loan_slice_uninit(words)
+            .map_err(|e| ipc_err("loan", Channel::Graph, e))?;
         let mut sample = assume_init_slice(uninit);
-        *sample.user_header_mut() =
-            GraphHeader { run_id: self.run_id, width: self.width, height: self.height, ..GraphHeader::default() };
-        Ok(GraphSampleMut { sample, num_nodes, num_edges })
+        *sample.user_header_mut() = GraphHeader {
+            run_id: self.run_id,
+            width: self.width,
+            height: self.height,
+            ..GraphHeader::default()
+        };
+        Ok(GraphSampleMut {
+            sample,
+            num_nodes,
+            num_edges,
+        })
     }
 
     /// Copies `nodes` and `edges` into a snapshot of `graph_version` and sends it.
-    pub fn publish(&self, graph_version: u64, nodes: &[u32], edges: &[GraphEdge]) -> Result<usize, ShmError> {
+    pub fn publish(
+        &self,
+        graph_version: u64,
+        nodes: &[u32],
+        edges: &[GraphEdge],
+    ) -> Result<usize, ShmError> {
         let mut s = self.loan(nodes.len(), edges.len())?;
         let g = s.snapshot_mut();
         g.header.graph_version = graph_version;
@@ -1300,7 +1704,9 @@ impl<S: Service> GraphPublisher<S> {
     /// Delivers the latest snapshot to subscribers that joined since the
     /// last send; call it periodically (iceoryx2 has no background thread).
     pub fn update_connections(&self) -> Result<(), ShmError> {
-        self.publisher.update_connections().map_err(|e| ipc_err("update connections", Channel::Graph, e))
+        self.publisher
+            .update_connections()
+            .map_err(|e| ipc_err("update connections", Channel::Graph, e))
     }
 }
 
@@ -1317,13 +1723,16 @@ impl<S: Service> GraphSampleMut<S> {
     pub fn snapshot_mut(&mut self) -> GraphSnapshotMut<'_> {
         let (n, m) = (self.num_nodes, self.num_edges);
         let (header, payload) = split_slice_sample(&mut self.sample);
-        GraphSnapshotMut::new(header, payload, n, m).expect("invariant: loaned with the counts' length")
+        GraphSnapshotMut::new(header, payload, n, m)
+            .expect("invariant: loaned with the counts' length")
     }
 
     /// Stamps `send_time_ns` and publishes.
     pub fn send(mut self) -> Result<usize, ShmError> {
         self.sample.user_header_mut().send_time_ns = monotonic_ns();
-        self.sample.send().map_err(|e| ipc_err("send", Channel::Graph, e))
+        self.sample
+            .send()
+            .map_err(|e| ipc_err("send", Channel::Graph, e))
     }
 }
 
@@ -1331,7 +1740,7 @@ impl<S: Service> GraphSampleMut<S> {
 #[derive(Debug)]
 pub struct GraphSubscriber<S: Service> {
     subscriber: Subscriber<S, [u32], GraphHeader>,
-    _service: publish_subscribe::PortFactory<S, [u32], GraphHeader>,
+    _service: GraphService<S>,
     width: u16,
     height: u16,
     run_id: u64,
@@ -1340,11 +1749,26 @@ pub struct GraphSubscriber<S: Service> {
 impl<S: Service> GraphSubscriber<S> {
     /// The newest snapshot, if one arrived since the last call.
     pub fn receive(&self) -> Result<Option<GraphSample<S>>, ShmError> {
-        let Some(sample) = self.subscriber.receive().map_err(|e| ipc_err("receive", Channel::Graph, e))? else {
+        let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(|e| ipc_err("receive", Channel::Graph, e))?
+        else {
             return Ok(None);
         };
-        GraphSnapshot::new(sample.user_header(), sample.payload(), self.width, self.height, self.run_id)?;
-        Ok(Some(GraphSample { sample, width: self.width, height: self.height, run_id: self.run_id }))
+        GraphSnapshot::new(
+            sample.user_header(),
+            sample.payload(),
+            self.width,
+            self.height,
+            self.run_id,
+        )?;
+        Ok(Some(GraphSample {
+            sample,
+            width: self.width,
+            height: self.height,
+            run_id: self.run_id,
+        }))
     }
 }
 
@@ -1360,7 +1784,17 @@ pub struct GraphSample<S: Service> {
 impl<S: Service> GraphSample<S> {
     /// Header, nodes and edges.
     pub fn snapshot(&self) -> GraphSnapshot<'_> {
-        GraphSnapshot::new(self.sample.user_header(), self.sample.payload(), self.width, self.height, self.run_id)
-            .expect("invariant: checked in GraphSubscriber::receive")
+        GraphSnapshot::new(
+            self.sample.user_header(),
+            self.sample.payload(),
+            self.width,
+            self.height,
+            self.run_id,
+        )
+        .expect("invariant: checked in GraphSubscriber::receive")
     }
 }
+
+#[cfg(test)]
+#[path = "service_tests.rs"]
+mod tests;

@@ -143,7 +143,11 @@ impl ObsShape {
         check_range(Channel::Obs, "num_envs", num_envs, MAX_ENVS)?;
         check_range(Channel::Obs, "width", width, MAX_GRID_SIDE)?;
         check_range(Channel::Obs, "height", height, MAX_GRID_SIDE)?;
-        Ok(ObsShape { num_envs: num_envs as u32, width: width as u16, height: height as u16 })
+        Ok(ObsShape {
+            num_envs: num_envs as u32,
+            width: width as u16,
+            height: height as u16,
+        })
     }
 
     /// `N` as `usize`.
@@ -221,7 +225,11 @@ impl ObsHeader {
 
     /// The shape this header announces (unchecked).
     pub fn shape(&self) -> ObsShape {
-        ObsShape { num_envs: self.num_envs, width: self.width, height: self.height }
+        ObsShape {
+            num_envs: self.num_envs,
+            width: self.width,
+            height: self.height,
+        }
     }
 
     /// Checks version, run and shape against what this process expects.
@@ -271,7 +279,11 @@ impl<'a> ObsBatch<'a> {
         check_len(Channel::Obs, expected.payload_bytes(), bytes.len())?;
         let meta = bytemuck::cast_slice(&bytes[..expected.meta_bytes()]);
         let cells = &bytes[expected.cells_offset()..expected.payload_bytes()];
-        Ok(ObsBatch { header, meta, cells })
+        Ok(ObsBatch {
+            header,
+            meta,
+            cells,
+        })
     }
 
     /// The shape of the batch.
@@ -317,7 +329,11 @@ impl<'a> ObsBatchMut<'a> {
         let (meta, rest) = bytes.split_at_mut(shape.cells_offset());
         let meta = bytemuck::cast_slice_mut(&mut meta[..shape.meta_bytes()]);
         let cells = &mut rest[..shape.cells_bytes()];
-        Ok(ObsBatchMut { header, meta, cells })
+        Ok(ObsBatchMut {
+            header,
+            meta,
+            cells,
+        })
     }
 
     /// The three parts, for handing `meta` and `cells` to the simulator.
@@ -342,7 +358,12 @@ pub(crate) fn check_range(
     if (1..=max).contains(&value) {
         Ok(())
     } else {
-        Err(SchemaError::OutOfRange { channel, what, value, max })
+        Err(SchemaError::OutOfRange {
+            channel,
+            what,
+            value,
+            max,
+        })
     }
 }
 
@@ -351,18 +372,38 @@ pub(crate) fn check_version(channel: Channel, wire: u32) -> Result<(), SchemaErr
     if wire == SCHEMA_VERSION {
         Ok(())
     } else {
-        Err(SchemaError::SchemaVersion { channel, wire, ours: SCHEMA_VERSION })
+        Err(SchemaError::SchemaVersion {
+            channel,
+            wire,
+            ours: SCHEMA_VERSION,
+        })
     }
 }
 
 /// `Err(RunMismatch)` unless the run ids agree.
 pub(crate) fn check_run(channel: Channel, expected: u64, wire: u64) -> Result<(), SchemaError> {
-    if expected == wire { Ok(()) } else { Err(SchemaError::RunMismatch { channel, expected, wire }) }
+    if expected == wire {
+        Ok(())
+    } else {
+        Err(SchemaError::RunMismatch {
+            channel,
+            expected,
+            wire,
+        })
+    }
 }
 
 /// `Err(PayloadTooShort)` unless `got >= needed`.
 pub(crate) fn check_len(channel: Channel, needed: usize, got: usize) -> Result<(), SchemaError> {
-    if got >= needed { Ok(()) } else { Err(SchemaError::PayloadTooShort { channel, needed, got }) }
+    if got >= needed {
+        Ok(())
+    } else {
+        Err(SchemaError::PayloadTooShort {
+            channel,
+            needed,
+            got,
+        })
+    }
 }
 
 const _: () = assert!(size_of::<ObsHeader>() == 48);
@@ -408,7 +449,11 @@ mod tests {
             h.seq = 7;
             h.run_id = 42;
             for (i, m) in meta.iter_mut().enumerate() {
-                *m = EnvMeta { x: i as u16, reward: i as f32 * 0.5, ..EnvMeta::EMPTY };
+                *m = EnvMeta {
+                    x: i as u16,
+                    reward: i as f32 * 0.5,
+                    ..EnvMeta::EMPTY
+                };
             }
             for (i, c) in cells.iter_mut().enumerate() {
                 *c = i as u8;
@@ -419,7 +464,10 @@ mod tests {
         assert_eq!(r.meta.len(), 3);
         assert_eq!(r.meta[2].x, 2);
         assert_eq!(r.meta[1].reward, 0.5);
-        assert_eq!(r.env_cells(1), &(20..40).map(|i| i as u8).collect::<Vec<_>>()[..]);
+        assert_eq!(
+            r.env_cells(1),
+            &(20..40).map(|i| i as u8).collect::<Vec<_>>()[..]
+        );
     }
 
     #[test]
@@ -430,13 +478,23 @@ mod tests {
         ObsBatchMut::new(&mut header, &mut words, &s).unwrap();
         let other = ObsShape::new(3, 13, 13).unwrap();
         let e = ObsBatch::new(&header, &words, &other, 1).unwrap_err();
-        assert_eq!(e.to_string(), "observation batch: grid 13x13 expected, publisher sends 5x4");
+        assert_eq!(
+            e.to_string(),
+            "observation batch: grid 13x13 expected, publisher sends 5x4"
+        );
         let fewer = ObsShape::new(2, 5, 4).unwrap();
         assert!(matches!(
             ObsBatch::new(&header, &words, &fewer, 1),
-            Err(SchemaError::BatchSize { expected: 2, wire: 3, .. })
+            Err(SchemaError::BatchSize {
+                expected: 2,
+                wire: 3,
+                ..
+            })
         ));
-        assert!(matches!(ObsBatch::new(&header, &words, &s, 2), Err(SchemaError::RunMismatch { .. })));
+        assert!(matches!(
+            ObsBatch::new(&header, &words, &s, 2),
+            Err(SchemaError::RunMismatch { .. })
+        ));
         let mut v2 = header;
         v2.schema_version = SCHEMA_VERSION + 1;
         let e = ObsBatch::new(&v2, &words, &s, 1).unwrap_err();
@@ -450,7 +508,11 @@ mod tests {
         );
         assert!(matches!(
             ObsBatch::new(&header, &words[..10], &s, 1),
-            Err(SchemaError::PayloadTooShort { needed: 124, got: 80, .. })
+            Err(SchemaError::PayloadTooShort {
+                needed: 124,
+                got: 80,
+                ..
+            })
         ));
     }
 }

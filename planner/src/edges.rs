@@ -1,0 +1,546 @@
+//! Edges of the world graph by random walks (Shang et al. 2019,
+//! arXiv:1907.00664, section 3.3 "Edge Connections"):
+//!
+//! > we perform random walks from `s_p ∈ V_p` [...] we claim a directed edge
+//! > `s_p → s_q` if there exist a random walk trajectory from `s_p` to `s_q`
+//! > that does not intersect a third pivotal state. We then collect the
+//! > shortest such actionable paths as the edge paths. Each path is further
+//! > refined by `π_g` if feasible. The action sequence length of the edge
+//! > path [...] defines the weight of the edge.
+//!
+//! ## Walks
+//! A walk runs in the simulator itself ([`sim::Env`], `AutoReset::Off`, no
+//! step limit, only the balls drawn in the layout), so its state is the
+//! simulator's: pose, door states and carried object, and doors, keys and
+//! one-way effects are exactly the simulator's. Each walk starts on its node
+//! in the layout's initial world, facing one of the four directions (the
+//! walks of a node cycle through them), and picks uniformly among the
+//! actions that do something there:
+//! `left`, `right`, `forward` when the cell in front can be entered,
+//! `pickup` when a key is in front and the hands are empty, `toggle` when a
+//! closed door, or a locked door with the key in hand, is in front. The
+//! walk policy never closes a door, never picks up a ball and never drops
+//! anything: closing or dropping is never needed to reach a place, and
+//! without them the world only ever changes one way (doors open, the key is
+//! taken, balls are collected), which is what lets edge paths be chained
+//! into routes (see [`crate::world_graph`]). A walk ends at the first other
+//! node it stands on (the edge), when its episode ends (exit, lava) or
+//! after [`crate::PlannerConfig::walk_len`] actions.
+//!
+//! The recorded path is loop-erased as it grows: when the walk comes back to
+//! a state (pose and world) it already passed, the loop is cut out. What is
+//! left is still an actionable path from `p` that touches no third node, and
+//! it holds no action that changes nothing.
+//!
+//! ## Shortening
+//! [`shorten_edge`] replaces an edge path by an exact shortest one: a
+//! breadth-first search over (pose, world) states with the walk policy's
+//! actions, from the four facings on `p`, never standing on a third node
+//! and never passing through the end of an episode. It stands in for the
+//! paper's refinement by `π_g` until the learned policy is wired in.
+//!
+//! ## Determinism
+//! Walks from node `i` draw from their own RNG seeded by `(seed, i)` and run
+//! in a fixed order, so the edges do not depend on the number of threads.
+
+use std::collections::HashMap;
+
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sim::{AutoReset, BallSpawn, Env, EnvConfig, EnvMeta, Layout, Object, Task, action, flags};
+
+use crate::config::PlannerConfig;
+use crate::ids::{CellIdx, NodeId};
+
+/// One directed edge `from → to` with the path kept for it.
+///
+/// The path starts on `from`'s cell facing `start_dir`, in the layout's
+/// initial world; `actions[i]` is the `i`-th action and `cells[i]` the
+/// agent's cell after it. The last cell is `to`'s, and no cell of the path
+/// is a third node's.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EdgePath {
+    /// Source node `s_p`.
+    pub from: NodeId,
+    /// Target node `s_q`.
+    pub to: NodeId,
+    /// Facing at the start: 0 right, 1 down, 2 left, 3 up.
+    pub start_dir: u8,
+    /// The actions (MiniGrid numbering).
+    pub actions: Vec<u8>,
+    /// The agent's cell after each action.
+    pub cells: Vec<CellIdx>,
+}
+
+impl EdgePath {
+    /// The edge weight: the path's action count (paper section 3.3).
+    #[inline]
+    pub fn weight(&self) -> u32 {
+        self.actions.len() as u32
+    }
+
+    /// Facing at the end of the path.
+    pub fn end_dir(&self) -> u8 {
+        self.actions.iter().fold(self.start_dir, |d, &a| match a {
+            action::LEFT => (d + 3) & 3,
+            action::RIGHT => (d + 1) & 3,
+            _ => d,
+        })
+    }
+
+    /// True when the path changes the world (opens a door or picks up the
+    /// key): replaying it after such a change needs the bookkeeping of
+    /// [`crate::world_graph::RouteWorld`].
+    pub fn changes_world(&self) -> bool {
+        self.actions.iter().any(|&a| a == action::PICKUP || a == action::TOGGLE)
+    }
+}
+
+/// `node_of_cell` entry of a cell that is no node.
+pub(crate) const NO_NODE: u16 = u16::MAX;
+/// Index of the "nothing carried" entry in the carried-object hash table.
+const CARRY_SLOTS: usize = sim::object::NUM_OBJECTS + 1;
+
+/// The maze as the walks see it: the simulator in the layout's initial
+/// world, which cells are nodes, and a Zobrist table that names a world
+/// (grid plus carried object) by a 64-bit hash.
+#[derive(Debug, Clone)]
+pub struct EdgeWorld {
+    template: Env,
+    nodes: Vec<CellIdx>,
+    node_of_cell: Vec<u16>,
+    zobrist: Vec<u64>,
+    multigoal: bool,
+}
+
+impl EdgeWorld {
+    /// The walk world of `layout` with nodes at `nodes` (checked by
+    /// [`crate::pivotal::check_nodes`] beforehand) and the rules of `task`.
+    pub fn new(layout: &Layout, nodes: &[CellIdx], task: Task) -> EdgeWorld {
+        let cfg = EnvConfig { task, max_steps: u32::MAX, balls: BallSpawn::Layout, auto_reset: AutoReset::Off };
+        let template = Env::new(layout.clone(), cfg, 0, 0);
+        let mut node_of_cell = vec![NO_NODE; layout.cells.len()];
+        for (i, c) in nodes.iter().enumerate() {
+            node_of_cell[c.index()] = i as u16;
+        }
+        let slots = layout.cells.len() * sim::object::NUM_OBJECTS + CARRY_SLOTS;
+        let zobrist = (0..slots as u64).map(|i| sim::env_seed(0x5a0b_7157, i)).collect();
+        EdgeWorld { template, nodes: nodes.to_vec(), node_of_cell, zobrist, multigoal: task.is_multigoal() }
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &Layout {
+        self.template.layout()
+    }
+
+    /// The node cells.
+    pub fn nodes(&self) -> &[CellIdx] {
+        &self.nodes
+    }
+
+    /// The node standing on `cell`, if any.
+    #[inline]
+    pub fn node_at(&self, cell: CellIdx) -> Option<NodeId> {
+        self.node_of_cell.get(cell.index()).copied().filter(|&n| n != NO_NODE).map(NodeId)
+    }
+
+    #[inline]
+    fn z_cell(&self, cell: usize, code: u8) -> u64 {
+        self.zobrist[cell * sim::object::NUM_OBJECTS + code as usize]
+    }
+
+    #[inline]
+    fn z_carry(&self, carrying: u8) -> u64 {
+        let slot = if carrying == EnvMeta::CARRYING_NOTHING { 0 } else { carrying as usize + 1 };
+        self.zobrist[self.layout().cells.len() * sim::object::NUM_OBJECTS + slot.min(CARRY_SLOTS - 1)]
+    }
+
+    /// Hash of the initial world.
+    fn initial_hash(&self) -> u64 {
+        let cells = self.template.grid().iter().enumerate().fold(0, |h, (i, &c)| h ^ self.z_cell(i, c));
+        cells ^ self.z_carry(EnvMeta::CARRYING_NOTHING)
+    }
+
+    /// Writes the walk policy's actions available in `env`'s state into
+    /// `out`; returns how many (always ≥ 2: the turns).
+    #[inline]
+    fn effective_actions(&self, env: &Env, out: &mut [u8; 5]) -> usize {
+        let pose = env.pose();
+        let front = CellIdx::of_pose(pose, self.layout().width).step(pose.dir, self.layout());
+        let obj = Object::from_code(env.grid()[front.index()]).unwrap_or(Object::Wall);
+        let carrying = env.carrying();
+        out[0] = action::LEFT;
+        out[1] = action::RIGHT;
+        let mut n = 2;
+        if obj.can_overlap() || (obj == Object::Ball && self.multigoal) {
+            out[n] = action::FORWARD;
+            n += 1;
+        }
+        if obj == Object::Key && carrying.is_none() {
+            out[n] = action::PICKUP;
+            n += 1;
+        }
+        if obj == Object::DoorClosed || (obj == Object::DoorLocked && carrying == Some(Object::Key)) {
+            out[n] = action::TOGGLE;
+            n += 1;
+        }
+        n
+    }
+
+    /// Applies `a` to `env` and returns the step record and the new world
+    /// hash (only the cell in front and the carried object can change).
+    #[inline]
+    fn step(&self, env: &mut Env, a: u8, hash: u64) -> (EnvMeta, u64) {
+        let pose = env.pose();
+        let front = CellIdx::of_pose(pose, self.layout().width).step(pose.dir, self.layout()).index();
+        let (before, carried) = (env.grid()[front], carry_code(env));
+        let meta = env.step_meta(a);
+        let after = env.grid()[front];
+        let mut h = hash;
+        if after != before {
+            h ^= self.z_cell(front, before) ^ self.z_cell(front, after);
+        }
+        if meta.carrying != carried {
+            h ^= self.z_carry(carried) ^ self.z_carry(meta.carrying);
+        }
+        (meta, h)
+    }
+
+    #[inline]
+    fn pose_id(&self, meta: &EnvMeta) -> u32 {
+        (meta.y as u32 * self.layout().width as u32 + meta.x as u32) * 4 + meta.dir as u32
+    }
+}
+
+#[inline]
+fn carry_code(env: &Env) -> u8 {
+    env.carrying().map_or(EnvMeta::CARRYING_NOTHING, |o| o as u8)
+}
+
+/// Reusable buffers of one thread's walks.
+struct WalkScratch {
+    env: Env,
+    dirty: bool,
+    /// Loop-erased path: `states[0]` is the start, `actions[i]` leads from
+    /// `states[i]` to `states[i + 1]`, whose cell is `cells[i]`.
+    states: Vec<(u32, u64)>,
+    actions: Vec<u8>,
+    cells: Vec<CellIdx>,
+    /// Per pose: index into `states` where it was last pushed (checked
+    /// against `states` before use, so stale entries are harmless).
+    slot: Vec<u32>,
+}
+
+impl WalkScratch {
+    fn new(world: &EdgeWorld) -> WalkScratch {
+        WalkScratch {
+            env: world.template.clone(),
+            dirty: false,
+            states: Vec::new(),
+            actions: Vec::new(),
+            cells: Vec::new(),
+            slot: vec![u32::MAX; world.layout().cells.len() * 4],
+        }
+    }
+}
+
+/// One random walk from node `p` facing `dir`; returns the node it reached
+/// (its loop-erased path is left in `s`).
+fn walk(world: &EdgeWorld, p: NodeId, dir: u8, len: u32, rng: &mut SmallRng, s: &mut WalkScratch, h0: u64) -> Option<NodeId> {
+    if s.dirty {
+        s.env = world.template.clone();
+        s.dirty = false;
+    }
+    let width = world.layout().width;
+    s.env.teleport(world.nodes[p.index()].pose(width, dir));
+    let mut hash = h0;
+    s.states.clear();
+    s.actions.clear();
+    s.cells.clear();
+    let start = (world.nodes[p.index()].0 * 4 + dir as u32, h0);
+    s.slot[start.0 as usize] = 0;
+    s.states.push(start);
+    let mut choices = [0u8; 5];
+    for _ in 0..len {
+        let n = world.effective_actions(&s.env, &mut choices);
+        let a = choices[rng.random_range(0..n)];
+        let (meta, h) = world.step(&mut s.env, a, hash);
+        if h != hash {
+            s.dirty = true;
+            hash = h;
+        }
+        let state = (world.pose_id(&meta), hash);
+        let cell = CellIdx(state.0 / 4);
+        let j = s.slot[state.0 as usize] as usize;
+        if j < s.states.len() && s.states[j] == state {
+            // Back to a state the path already passed: erase the loop.
+            s.states.truncate(j + 1);
+            s.actions.truncate(j);
+            s.cells.truncate(j);
+        } else {
+            s.slot[state.0 as usize] = s.states.len() as u32;
+            s.states.push(state);
+            s.actions.push(a);
+            s.cells.push(cell);
+        }
+        if let Some(q) = world.node_at(cell).filter(|&q| q != p) {
+            return Some(q);
+        }
+        if meta.flags & flags::TERMINATED != 0 {
+            return None;
+        }
+    }
+    None
+}
+
+/// The edges found by `cfg.walks_per_node` random walks from every node
+/// (module docs), one per ordered pair at most, sorted by `(from, to)`,
+/// each the shortest path any walk found (ties: the earliest walk); then,
+/// when `cfg.shorten` is set, each shortened by [`shorten_edge`]. Nodes on
+/// the exit get no outgoing edges: the episode ends there.
+pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
+    let h0 = world.initial_hash();
+    let per_node: Vec<Vec<EdgePath>> = (0..world.nodes.len())
+        .into_par_iter()
+        .map_init(
+            || WalkScratch::new(world),
+            |s, i| {
+                let p = NodeId(i as u16);
+                let mut best: Vec<EdgePath> = Vec::new();
+                if world.layout().cells[world.nodes[i].index()] == Object::Exit as u8 {
+                    return best;
+                }
+                let mut rng = SmallRng::seed_from_u64(sim::env_seed(cfg.seed, i as u64));
+                for w in 0..cfg.walks_per_node {
+                    let dir = (w % 4) as u8;
+                    let Some(q) = walk(world, p, dir, cfg.walk_len, &mut rng, s, h0) else { continue };
+                    match best.iter_mut().find(|e| e.to == q) {
+                        Some(e) if e.actions.len() <= s.actions.len() => {}
+                        Some(e) => {
+                            e.start_dir = dir;
+                            e.actions.clone_from(&s.actions);
+                            e.cells.clone_from(&s.cells);
+                        }
+                        None => best.push(EdgePath { from: p, to: q, start_dir: dir, actions: s.actions.clone(), cells: s.cells.clone() }),
+                    }
+                }
+                best.sort_unstable_by_key(|e| e.to);
+                best
+            },
+        )
+        .collect();
+    let edges: Vec<EdgePath> = per_node.into_iter().flatten().collect();
+    if cfg.shorten { edges.par_iter().map(|e| shorten_edge(world, e)).collect() } else { edges }
+}
+
+/// The edge `from → to` with its path replaced by an exact shortest one
+/// (module docs, "Shortening"), or `edge` itself when none is shorter.
+/// Ties between facings go to the lowest `start_dir`.
+pub fn shorten_edge(world: &EdgeWorld, edge: &EdgePath) -> EdgePath {
+    match shortest_edge_path(world, edge.from, edge.to) {
+        Some(p) if p.actions.len() <= edge.actions.len() => p,
+        _ => edge.clone(),
+    }
+}
+
+/// Breadth-first search over (pose, world) states for the shortest path
+/// from node `from` (any facing, initial world) to node `to` that touches no
+/// third node; `None` when there is none.
+pub fn shortest_edge_path(world: &EdgeWorld, from: NodeId, to: NodeId) -> Option<EdgePath> {
+    let width = world.layout().width;
+    let (from_cell, to_cell) = (*world.nodes.get(from.index())?, *world.nodes.get(to.index())?);
+    if from == to || world.layout().cells[from_cell.index()] == Object::Exit as u8 {
+        return None;
+    }
+    // Worlds met so far: their hash and an environment in that world.
+    let mut worlds: Vec<(u64, Env)> = vec![(world.initial_hash(), world.template.clone())];
+    // BFS states: (pose id, world index, parent state, action from parent).
+    let mut states: Vec<(u32, u32, u32, u8)> = Vec::new();
+    let mut seen: HashMap<(u32, u32), ()> = HashMap::new();
+    for dir in 0..4u8 {
+        let pid = from_cell.0 * 4 + dir as u32;
+        seen.insert((pid, 0), ());
+        states.push((pid, 0, u32::MAX, 0));
+    }
+    let mut head = 0;
+    let mut choices = [0u8; 5];
+    while head < states.len() {
+        let (pid, wi, _, _) = states[head];
+        if pid / 4 == to_cell.0 {
+            let (mut actions, mut cells) = (Vec::new(), Vec::new());
+            let mut i = head;
+            while states[i].2 != u32::MAX {
+                actions.push(states[i].3);
+                cells.push(CellIdx(states[i].0 / 4));
+                i = states[i].2 as usize;
+            }
+            actions.reverse();
+            cells.reverse();
+            return Some(EdgePath { from, to, start_dir: (states[i].0 % 4) as u8, actions, cells });
+        }
+        let pose = CellIdx(pid / 4).pose(width, (pid % 4) as u8);
+        let hash = worlds[wi as usize].0;
+        let env = &mut worlds[wi as usize].1;
+        env.teleport(pose);
+        let n = world.effective_actions(env, &mut choices);
+        for &a in &choices[..n] {
+            // Actions that may change the world step a copy; the others
+            // reuse the world's environment (teleported back each time).
+            let front = CellIdx(pid / 4).step(pose.dir, world.layout()).index();
+            let changes = a == action::PICKUP || a == action::TOGGLE || (a == action::FORWARD && worlds[wi as usize].1.grid()[front] == Object::Ball as u8);
+            let (meta, h, env_after) = if changes {
+                let mut e = worlds[wi as usize].1.clone();
+                e.teleport(pose);
+                let (m, h) = world.step(&mut e, a, hash);
+                (m, h, Some(e))
+            } else {
+                let e = &mut worlds[wi as usize].1;
+                e.teleport(pose);
+                let (m, h) = world.step(e, a, hash);
+                (m, h, None)
+            };
+            let next = world.pose_id(&meta);
+            let cell = CellIdx(next / 4);
+            if cell != to_cell && (meta.flags & flags::TERMINATED != 0 || world.node_at(cell).is_some_and(|q| q != from)) {
+                continue;
+            }
+            let nw = match worlds.iter().position(|(wh, _)| *wh == h) {
+                Some(k) => k as u32,
+                None => {
+                    let e = env_after.unwrap_or_else(|| worlds[wi as usize].1.clone());
+                    worlds.push((h, e));
+                    (worlds.len() - 1) as u32
+                }
+            };
+            if seen.insert((next, nw), ()).is_none() {
+                states.push((next, nw, head as u32, a));
+            }
+        }
+        head += 1;
+    }
+    None
+}
+
+/// Replays `edge`'s path in the simulator from `from`'s cell facing
+/// `start_dir` in the initial world and checks it: every action leads to
+/// the recorded cell, no cell on the way is a third node, and it ends on
+/// `to`. Used on graphs loaded from files. The error says what failed.
+pub fn check_edge_path(world: &EdgeWorld, edge: &EdgePath) -> Result<(), String> {
+    let n = world.nodes.len();
+    if edge.from.index() >= n || edge.to.index() >= n || edge.from == edge.to {
+        return Err(format!("edge {} -> {} does not join two distinct nodes of {n}", edge.from, edge.to));
+    }
+    if edge.actions.is_empty() || edge.actions.len() != edge.cells.len() || edge.start_dir > 3 {
+        return Err(format!("edge {} -> {}: {} actions, {} cells, start_dir {}", edge.from, edge.to, edge.actions.len(), edge.cells.len(), edge.start_dir));
+    }
+    let mut env = world.template.clone();
+    env.teleport(world.nodes[edge.from.index()].pose(world.layout().width, edge.start_dir));
+    for (i, (&a, &c)) in edge.actions.iter().zip(&edge.cells).enumerate() {
+        let meta = env.step_meta(a);
+        let cell = CellIdx(world.pose_id(&meta) / 4);
+        if cell != c {
+            return Err(format!("edge {} -> {}: action {i} leads to {cell}, the path says {c}", edge.from, edge.to));
+        }
+        let last = i + 1 == edge.actions.len();
+        match world.node_at(cell) {
+            Some(q) if q == edge.to && last => return Ok(()),
+            Some(q) if q != edge.from => return Err(format!("edge {} -> {}: action {i} touches the third node {q}", edge.from, edge.to)),
+            _ => {}
+        }
+        if meta.flags & flags::TERMINATED != 0 {
+            return Err(format!("edge {} -> {}: the episode ends at action {i}", edge.from, edge.to));
+        }
+    }
+    Err(format!("edge {} -> {}: the path does not end on {}", edge.from, edge.to, edge.to))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pivotal::check_nodes;
+
+    fn layout(text: &str) -> Layout {
+        Layout::parse("t", text).expect("valid layout")
+    }
+
+    fn cell(l: &Layout, x: usize, y: usize) -> CellIdx {
+        CellIdx::from_xy(x, y, l.width)
+    }
+
+    fn cfg(walks: u32) -> PlannerConfig {
+        PlannerConfig { walks_per_node: walks, walk_len: 200, ..PlannerConfig::default() }
+    }
+
+    #[test]
+    fn corridor_gives_edges_between_neighbours_only() {
+        let l = layout("##########\n#>......E#\n##########\n");
+        let nodes = check_nodes(&l, &[cell(&l, 1, 1), cell(&l, 4, 1), cell(&l, 7, 1)]).expect("nodes");
+        let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
+        let edges = discover_edges(&w, &cfg(64));
+        let pairs: Vec<(u16, u16, u32)> = edges.iter().map(|e| (e.from.0, e.to.0, e.weight())).collect();
+        // 0↔1 and 1↔2 (3 cells apart: 3 forwards after facing the right way); never 0→2.
+        assert_eq!(pairs, vec![(0, 1, 3), (1, 0, 3), (1, 2, 3), (2, 1, 3)]);
+        assert!(edges.iter().all(|e| e.cells.last() == Some(&nodes[e.to.index()])));
+    }
+
+    #[test]
+    fn closed_door_needs_a_toggle_and_the_path_records_it() {
+        let l = layout("#######\n#>.C.E#\n#######\n");
+        let nodes = check_nodes(&l, &[cell(&l, 2, 1), cell(&l, 4, 1)]).expect("nodes");
+        let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
+        let edges = discover_edges(&w, &cfg(64));
+        let e = edges.iter().find(|e| (e.from.0, e.to.0) == (0, 1)).expect("edge through the closed door");
+        assert_eq!(e.actions, vec![action::TOGGLE, action::FORWARD, action::FORWARD]);
+        assert_eq!(e.start_dir, 0);
+        assert!(e.changes_world());
+    }
+
+    #[test]
+    fn locked_door_is_crossed_only_with_the_key() {
+        // No key anywhere: no edge through the locked door.
+        let l = layout("#######\n#>.D.E#\n#######\n");
+        let nodes = check_nodes(&l, &[cell(&l, 2, 1), cell(&l, 4, 1)]).expect("nodes");
+        let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
+        assert!(discover_edges(&w, &cfg(256)).is_empty());
+        assert!(shortest_edge_path(&w, NodeId(0), NodeId(1)).is_none());
+        // The key on the near side: the edge picks it up and unlocks the door.
+        let l = layout("#######\n#.>D.E#\n#K#####\n#######\n");
+        let nodes = check_nodes(&l, &[cell(&l, 2, 1), cell(&l, 4, 1)]).expect("nodes");
+        let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
+        let edges = discover_edges(&w, &cfg(2048));
+        let e = edges.iter().find(|e| (e.from.0, e.to.0) == (0, 1)).expect("edge through the unlocked door");
+        assert!(e.actions.contains(&action::PICKUP) && e.actions.contains(&action::TOGGLE), "{:?}", e.actions);
+        // Nothing leads back: the node beyond the door has a path back only once
+        // the door is open, which its walks (from the initial world) never see.
+        assert!(!edges.iter().any(|e| (e.from.0, e.to.0) == (1, 0)));
+    }
+
+    #[test]
+    fn same_seed_same_edges_on_any_thread_count() {
+        let l = sim::Maze::Small.layout(true);
+        let nodes = crate::pivotal::v_rand(&l, 12, 5).expect("nodes");
+        let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
+        let c = PlannerConfig { shorten: false, ..cfg(128) };
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| discover_edges(&w, &c));
+        let many = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool").install(|| discover_edges(&w, &c));
+        assert_eq!(one, many);
+        assert!(!one.is_empty());
+    }
+
+    #[test]
+    fn shortening_never_lengthens_and_matches_bfs() {
+        let l = sim::Maze::Small.layout(false);
+        let nodes = crate::pivotal::v_rand(&l, 8, 1).expect("nodes");
+        let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
+        let raw = discover_edges(&w, &PlannerConfig { shorten: false, ..cfg(256) });
+        for e in &raw {
+            let s = shorten_edge(&w, e);
+            assert!(s.weight() <= e.weight());
+            assert_eq!((s.from, s.to), (e.from, e.to));
+            assert_eq!(s.weight(), shortest_edge_path(&w, e.from, e.to).expect("reachable").weight());
+            assert!(s.cells[..s.cells.len() - 1].iter().all(|&c| w.node_at(c).is_none_or(|n| n == e.from)));
+        }
+    }
+}
