@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 
 mod commands;
 mod latency;
+mod pipeline;
 mod roles;
 mod world;
 
@@ -28,6 +29,9 @@ enum Command {
     /// The main job on the embedded default: render the medium maze, run a
     /// short batched simulation and report its throughput.
     Demo(commands::demo::DemoArgs),
+    /// The three processes side by side (sim, learner, planner) over shared
+    /// memory, stopped together on Ctrl-C.
+    Run(commands::run::RunCmdArgs),
     /// Simulator tools: render a maze, trace an action sequence.
     #[command(subcommand)]
     Sim(commands::sim::SimCommand),
@@ -60,6 +64,7 @@ fn run() -> anyhow::Result<ExitCode> {
     let cli = Cli::parse();
     match cli.command {
         Command::Demo(args) => commands::demo::run(args),
+        Command::Run(a) => commands::run::run(a),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
         Command::Planner(PlannerCommand::Serve(a)) => roles::planner::serve(a),

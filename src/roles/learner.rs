@@ -180,9 +180,12 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         }
     }
     writeln!(stream_log, "{}", serde_json::to_string(&env.stats())?)?;
+    let stream = env.stats();
+    drop((route_client, graph, env));
+    ctx.tidy();
     let report = LearnerReport {
         policy: policy.name().to_string(),
-        stream: env.stats(),
+        stream,
         batches,
         episodes,
         mean_episode_return: if episodes > 0 { return_sum / episodes as f64 } else { f64::NAN },

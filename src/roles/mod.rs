@@ -119,6 +119,17 @@ impl RunCtx {
             .unwrap_or(false)
     }
 
+    /// After this process dropped its ports: when no other process of the
+    /// run is alive, removes the run's leftover shared memory (iceoryx2's
+    /// per-prefix `global_mgmt` segment). The last process out tidies up.
+    pub fn tidy(&self) {
+        if let Ok(left) = shm_schemas::service::teardown_run::<ipc::Service>(&self.config)
+            && !left.is_empty()
+        {
+            tracing::warn!("shared memory still present after teardown: {left:?}");
+        }
+    }
+
     /// Writes `value` as pretty JSON to `<run dir>/<name>` atomically.
     pub fn write_json<T: Serialize>(&self, name: &str, value: &T) -> anyhow::Result<()> {
         let bytes = serde_json::to_vec_pretty(value)?;

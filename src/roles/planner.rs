@@ -239,15 +239,18 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 PeerEvent::Quiet => {}
             }
         }
-        // Spin briefly after activity (fast route answers under load), then
-        // sleep so the sim and the learner keep the cores.
-        if now - last_activity > Duration::from_millis(2) {
-            std::thread::sleep(Duration::from_micros(100));
+        // Spin briefly after activity (fast answers to bursts of route
+        // requests), then sleep: on 2 cores the sim and the learner spin, and
+        // every wake-up of the planner preempts one of them.
+        if now - last_activity > Duration::from_micros(300) {
+            std::thread::sleep(Duration::from_millis(1));
         } else {
             std::hint::spin_loop();
         }
     }
 
+    drop((obs, server, snapshots, node));
+    ctx.tidy();
     coverage.save_png(&layout, &ctx.dir.join("coverage.png"), 24)?;
     let report = PlannerReport {
         nodes: nodes.len(),

@@ -197,6 +197,8 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         }
     }
 
+    drop((actions, publisher, node));
+    ctx.tidy();
     let seconds = (sent_at - started).as_secs_f64().max(1e-9);
     let report = SimReport {
         batches: seq + 1,

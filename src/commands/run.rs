@@ -1,0 +1,226 @@
+//! `worldgraph run`: the three processes side by side.
+//!
+//! Starts the planner, the sim and the learner as separate processes of one
+//! run, stops them together on Ctrl-C / SIGTERM (or after `--duration`),
+//! restarts a process that died when `--on-peer-death wait` (its peers wait
+//! for it and it rejoins), tears the run's shared memory down at the end
+//! and prints a summary table from the processes' reports.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use iceoryx2::prelude::ipc;
+use shm_schemas::service::{RunName, run_config, teardown_run};
+
+use crate::pipeline::{Pipeline, Role, world_words};
+use crate::roles::learner::PolicyKind;
+use crate::roles::planner::GraphArgs;
+use crate::roles::{EXIT_PEER_DIED, OnPeerDeath};
+use crate::world::WorldArgs;
+
+/// `run` options.
+#[derive(Debug, Clone, Args)]
+pub struct RunCmdArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[command(flatten)]
+    pub graph: GraphArgs,
+    /// Run name (shared-memory services `wg/<run>/...`).
+    #[arg(long, default_value = "default")]
+    pub run: String,
+    /// Run directory [default: runs/<run>].
+    #[arg(long)]
+    pub run_dir: Option<PathBuf>,
+    /// When a process dies: restart it and let its peers wait (`wait`), or
+    /// stop the whole run (`exit`).
+    #[arg(long, value_enum, default_value = "wait")]
+    pub on_peer_death: OnPeerDeath,
+    /// Stop after this many seconds (default: until Ctrl-C).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Environments in the batch.
+    #[arg(long, default_value_t = 256)]
+    pub envs: usize,
+    /// Threads stepping the batch in the sim process.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    /// The learner's policy.
+    #[arg(long, value_enum, default_value = "random")]
+    pub policy: PolicyKind,
+    /// The learner asks the planner for a route every this many batches (0 = never).
+    #[arg(long, default_value_t = 0)]
+    pub route_every: u64,
+    /// Write each process's messages to `<run dir>/<role>.log` instead of the terminal.
+    #[arg(long)]
+    pub logs_to_files: bool,
+}
+
+impl RunCmdArgs {
+    /// The run directory.
+    pub fn dir(&self) -> PathBuf {
+        self.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(&self.run))
+    }
+
+    /// The argument list of `role`'s process.
+    pub fn role_args(&self, role: Role) -> Vec<String> {
+        let mut v: Vec<String> = match role {
+            Role::Sim => vec!["sim".into(), "serve".into()],
+            Role::Learner => vec!["learner".into(), "serve".into()],
+            Role::Planner => vec!["planner".into(), "serve".into()],
+        };
+        v.extend(world_words(&self.world));
+        v.extend([
+            "--run".into(),
+            self.run.clone(),
+            "--run-dir".into(),
+            self.dir().display().to_string(),
+            "--on-peer-death".into(),
+            match self.on_peer_death {
+                OnPeerDeath::Wait => "wait".into(),
+                OnPeerDeath::Exit => "exit".into(),
+            },
+            "--envs".into(),
+            self.envs.to_string(),
+        ]);
+        match role {
+            Role::Sim => v.extend(["--threads".into(), self.threads.to_string()]),
+            Role::Learner => {
+                let p = match self.policy {
+                    PolicyKind::Random => "random",
+                    PolicyKind::ActorCritic => "actor-critic",
+                };
+                v.extend(["--policy".into(), p.into(), "--route-every".into(), self.route_every.to_string()]);
+            }
+            Role::Planner => {
+                let g = &self.graph;
+                v.extend([
+                    "--nodes".into(),
+                    g.nodes.to_string(),
+                    "--walks-per-node".into(),
+                    g.walks_per_node.to_string(),
+                    "--walk-len".into(),
+                    g.walk_len.to_string(),
+                ]);
+                if let Some(f) = &g.node_file {
+                    v.extend(["--node-file".into(), f.display().to_string()]);
+                }
+                if let Some(s) = g.graph_seed {
+                    v.extend(["--graph-seed".into(), s.to_string()]);
+                }
+            }
+        }
+        v
+    }
+
+    /// A pipeline of the three roles.
+    pub fn pipeline(&self) -> anyhow::Result<Pipeline> {
+        let dir = self.dir();
+        std::fs::create_dir_all(&dir)?;
+        let roles = Role::ALL.iter().map(|&r| (r, self.role_args(r))).collect();
+        Pipeline::new(roles, self.logs_to_files.then_some(dir.as_path()))
+    }
+}
+
+/// Installs SIGINT/SIGTERM handlers that set the returned flag.
+pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop))?;
+    }
+    Ok(stop)
+}
+
+/// Tears the run's shared memory down; returns the files left behind.
+pub fn teardown(run: &str) -> anyhow::Result<Vec<PathBuf>> {
+    let config = run_config(&RunName::new(run)?)?;
+    // Peers exit within moments of each other; give the registry a moment.
+    let until = Instant::now() + Duration::from_secs(3);
+    loop {
+        match teardown_run::<ipc::Service>(&config) {
+            Ok(left) => return Ok(left),
+            Err(e) if Instant::now() < until => {
+                tracing::debug!("teardown: {e}; retrying");
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+fn read_json(dir: &Path, name: &str) -> Option<serde_json::Value> {
+    serde_json::from_slice(&std::fs::read(dir.join(name)).ok()?).ok()
+}
+
+/// Prints the end-of-run table from the processes' reports.
+pub fn print_summary(dir: &Path, restarts: &[(Role, u32)], leftovers: &[PathBuf]) {
+    let sim = read_json(dir, "sim.report.json");
+    let learner = read_json(dir, "learner.report.json");
+    let planner = read_json(dir, "planner.report.json");
+    let f = |v: &Option<serde_json::Value>, k: &str| -> String {
+        v.as_ref().and_then(|v| v.pointer(k)).map_or("-".into(), |x| match x.as_f64() {
+            Some(n) if n.fract() != 0.0 => format!("{n:.2}"),
+            _ => x.to_string(),
+        })
+    };
+    println!("\nrun summary ({})", dir.display());
+    println!("  {:<40} {:>14}", "figure", "value");
+    let rows = [
+        ("sim: batches", f(&sim, "/batches")),
+        ("sim: env-steps/s", f(&sim, "/steps_per_sec")),
+        ("sim: action round trip p50 (us)", f(&sim, "/roundtrip_p50_us")),
+        ("sim: action round trip p99 (us)", f(&sim, "/roundtrip_p99_us")),
+        ("sim: episodes", f(&sim, "/episodes")),
+        ("learner: batches answered", f(&learner, "/batches")),
+        ("learner: batches lost", f(&learner, "/stream/lost")),
+        ("learner: batches reordered", f(&learner, "/stream/reordered")),
+        ("learner: mean episode return", f(&learner, "/mean_episode_return")),
+        ("planner: graph nodes / edges", format!("{} / {}", f(&planner, "/nodes"), f(&planner, "/edges"))),
+        ("planner: cells visited", f(&planner, "/cells_visited")),
+        ("planner: routes answered", f(&planner, "/routes_answered")),
+    ];
+    for (k, v) in rows {
+        println!("  {k:<40} {v:>14}");
+    }
+    for (r, n) in restarts {
+        println!("  {:<40} {:>14}", format!("{} restarts", r.name()), n);
+    }
+    println!("  {:<40} {:>14}", "shared-memory files left behind", leftovers.len());
+}
+
+/// Runs `worldgraph run`.
+pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
+    RunName::new(&a.run)?;
+    let stop = stop_flag()?;
+    let mut p = a.pipeline()?;
+    p.start_all()?;
+    let deadline = a.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let mut failed = false;
+    'watch: loop {
+        std::thread::sleep(Duration::from_millis(50));
+        if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+            break;
+        }
+        for (role, status) in p.poll_exited() {
+            if status.code() == Some(EXIT_PEER_DIED as i32) || status.success() {
+                eprintln!("run: the {} process ended ({status}); stopping the run", role.name());
+                break 'watch;
+            }
+            eprintln!("run: the {} process died ({status})", role.name());
+            if a.on_peer_death == OnPeerDeath::Wait {
+                eprintln!("run: restarting the {} process", role.name());
+                p.spawn(role)?;
+            } else {
+                failed = true;
+                break 'watch;
+            }
+        }
+    }
+    p.stop_all(Duration::from_secs(3));
+    let leftovers = teardown(&a.run)?;
+    let restarts: Vec<(Role, u32)> = Role::ALL.iter().map(|&r| (r, p.restarts(r))).collect();
+    print_summary(&a.dir(), &restarts, &leftovers);
+    Ok(if failed { std::process::ExitCode::FAILURE } else { std::process::ExitCode::SUCCESS })
+}

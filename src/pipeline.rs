@@ -1,0 +1,222 @@
+//! Starting, watching, restarting and stopping the three role processes
+//! side by side (used by `run`, `bench pipeline` and `soak`).
+//!
+//! Each role is this same executable with a role subcommand (`sim serve`,
+//! `learner serve`, `planner serve`). Children are always reaped (a zombie
+//! keeps its iceoryx2 node looking alive), stopped with SIGTERM first and
+//! SIGKILL only after a grace period, and the run's shared memory is torn
+//! down once all of them are gone.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+use crate::world::WorldArgs;
+
+/// One of the three processes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    /// The simulator.
+    Sim,
+    /// The learner.
+    Learner,
+    /// The planner.
+    Planner,
+}
+
+impl Role {
+    /// All roles, in start order (the planner first: it builds the graph
+    /// while the others connect).
+    pub const ALL: [Role; 3] = [Role::Planner, Role::Sim, Role::Learner];
+
+    /// The role's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Role::Sim => "sim",
+            Role::Learner => "learner",
+            Role::Planner => "planner",
+        }
+    }
+}
+
+/// The command-line words that reproduce `w`.
+pub fn world_words(w: &WorldArgs) -> Vec<String> {
+    let mut v = vec!["--task".into(), w.task.name().into(), "--seed".into(), w.seed.to_string()];
+    match &w.layout {
+        Some(p) => v.extend(["--layout".into(), p.display().to_string()]),
+        None => v.extend(["--maze".into(), w.maze.name().into()]),
+    }
+    if let Some(m) = w.max_steps {
+        v.extend(["--max-steps".into(), m.to_string()]);
+    }
+    v
+}
+
+struct Slot {
+    role: Role,
+    args: Vec<String>,
+    child: Option<Child>,
+    started: Instant,
+    spawned: u32,
+}
+
+/// The running role processes of one run.
+pub struct Pipeline {
+    exe: PathBuf,
+    log_dir: Option<PathBuf>,
+    slots: Vec<Slot>,
+}
+
+impl Pipeline {
+    /// A pipeline of `roles` with their full argument lists (role words
+    /// included); children log to `<log_dir>/<role>.log` when given, else
+    /// inherit stderr.
+    pub fn new(roles: Vec<(Role, Vec<String>)>, log_dir: Option<&Path>) -> anyhow::Result<Pipeline> {
+        let exe = std::env::current_exe().context("cannot find the worldgraph executable")?;
+        let slots = roles
+            .into_iter()
+            .map(|(role, args)| Slot { role, args, child: None, started: Instant::now(), spawned: 0 })
+            .collect();
+        Ok(Pipeline { exe, log_dir: log_dir.map(Path::to_path_buf), slots })
+    }
+
+    fn slot(&mut self, role: Role) -> &mut Slot {
+        self.slots.iter_mut().find(|s| s.role == role).expect("invariant: every started role has a slot")
+    }
+
+    /// Starts (or restarts) `role`.
+    pub fn spawn(&mut self, role: Role) -> anyhow::Result<()> {
+        let exe = self.exe.clone();
+        let log_dir = self.log_dir.clone();
+        let slot = self.slot(role);
+        let mut cmd = Command::new(&exe);
+        cmd.args(&slot.args).stdin(Stdio::null()).stdout(Stdio::null());
+        if let Some(dir) = &log_dir {
+            let log = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(dir.join(format!("{}.log", role.name())))?;
+            cmd.stderr(log);
+        }
+        let child = cmd.spawn().with_context(|| format!("cannot start the {} process", role.name()))?;
+        slot.spawned += 1;
+        slot.child = Some(child);
+        slot.started = Instant::now();
+        Ok(())
+    }
+
+    /// Starts every role.
+    pub fn start_all(&mut self) -> anyhow::Result<()> {
+        let roles: Vec<Role> = self.slots.iter().map(|s| s.role).collect();
+        for r in roles {
+            self.spawn(r)?;
+        }
+        Ok(())
+    }
+
+    /// Roles whose process has exited since the last call (reaped), with status.
+    pub fn poll_exited(&mut self) -> Vec<(Role, ExitStatus)> {
+        let mut out = Vec::new();
+        for s in &mut self.slots {
+            if let Some(child) = &mut s.child
+                && let Ok(Some(status)) = child.try_wait()
+            {
+                out.push((s.role, status));
+                s.child = None;
+            }
+        }
+        out
+    }
+
+    /// Process id of `role`, if running.
+    pub fn pid(&self, role: Role) -> Option<u32> {
+        self.slots.iter().find(|s| s.role == role)?.child.as_ref().map(Child::id)
+    }
+
+    /// Seconds since `role` was last started.
+    pub fn uptime(&self, role: Role) -> Option<Duration> {
+        let s = self.slots.iter().find(|s| s.role == role)?;
+        s.child.as_ref().map(|_| s.started.elapsed())
+    }
+
+    /// Restarts so far of `role`.
+    pub fn restarts(&self, role: Role) -> u32 {
+        self.slots.iter().find(|s| s.role == role).map_or(0, |s| s.spawned.saturating_sub(1))
+    }
+
+    /// Whether any role is still running.
+    pub fn any_running(&self) -> bool {
+        self.slots.iter().any(|s| s.child.is_some())
+    }
+
+    /// Sends `sig` to `role`'s process.
+    pub fn signal(&self, role: Role, sig: Signal) {
+        if let Some(pid) = self.pid(role) {
+            let _ = kill(Pid::from_raw(pid as i32), sig);
+        }
+    }
+
+    /// SIGKILLs `role` and reaps it (a soak test's crash).
+    pub fn kill_hard(&mut self, role: Role) -> anyhow::Result<()> {
+        let slot = self.slot(role);
+        if let Some(child) = &mut slot.child {
+            child.kill()?;
+            child.wait()?;
+        }
+        slot.child = None;
+        Ok(())
+    }
+
+    /// Waits up to `grace` for every process to exit by itself, then
+    /// SIGTERMs the rest, waits `grace` again and SIGKILLs what remains.
+    /// Returns each role's last exit status.
+    pub fn stop_all(&mut self, grace: Duration) -> Vec<(Role, Option<ExitStatus>)> {
+        let mut done: Vec<(Role, Option<ExitStatus>)> = Vec::new();
+        for phase in 0..3 {
+            if phase == 1 {
+                for s in &self.slots {
+                    if let Some(c) = &s.child {
+                        let _ = kill(Pid::from_raw(c.id() as i32), Signal::SIGTERM);
+                    }
+                }
+            }
+            if phase == 2 {
+                for s in &mut self.slots {
+                    if let Some(c) = &mut s.child {
+                        let _ = c.kill();
+                    }
+                }
+            }
+            let until = Instant::now() + grace;
+            while Instant::now() < until && self.any_running() {
+                for (r, st) in self.poll_exited() {
+                    done.push((r, Some(st)));
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if !self.any_running() {
+                break;
+            }
+        }
+        for (r, st) in self.poll_exited() {
+            done.push((r, Some(st)));
+        }
+        done
+    }
+}
+
+impl Drop for Pipeline {
+    fn drop(&mut self) {
+        for s in &mut self.slots {
+            if let Some(c) = &mut s.child {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+}
