@@ -49,11 +49,6 @@ impl Latencies {
         h.saturating_record(ns.clamp(1, MAX_NS));
     }
 
-    /// The histogram `name`, if any value was registered under it.
-    pub fn get(&self, name: &str) -> Option<&Histogram<u64>> {
-        self.hists.get(name)
-    }
-
     /// Percentile of `name` in microseconds (NaN when empty or unknown).
     pub fn percentile_us(&self, name: &str, p: f64) -> f64 {
         match self.hists.get(name) {
@@ -66,14 +61,6 @@ impl Latencies {
     pub fn reset(&mut self) {
         for h in self.hists.values_mut() {
             h.reset();
-        }
-    }
-
-    /// Adds every histogram of `other` into this one's of the same name.
-    pub fn merge(&mut self, other: &Latencies) {
-        for (k, h) in &other.hists {
-            let mine = self.hists.entry(k.clone()).or_insert_with(new_hist);
-            let _ = mine.add(h);
         }
     }
 

@@ -32,6 +32,9 @@ enum Command {
     /// The three processes side by side (sim, learner, planner) over shared
     /// memory, stopped together on Ctrl-C.
     Run(commands::run::RunCmdArgs),
+    /// The three processes for M minutes, optionally killing one every S
+    /// seconds; reports losses, leaks, recoveries and p99 per minute.
+    Soak(commands::soak::SoakArgs),
     /// Simulator tools: render a maze, trace an action sequence.
     #[command(subcommand)]
     Sim(commands::sim::SimCommand),
@@ -65,6 +68,7 @@ fn run() -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Demo(args) => commands::demo::run(args),
         Command::Run(a) => commands::run::run(a),
+        Command::Soak(a) => commands::soak::run(a),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
         Command::Planner(PlannerCommand::Serve(a)) => roles::planner::serve(a),

@@ -18,7 +18,7 @@ use nix::unistd::Pid;
 use crate::world::WorldArgs;
 
 /// One of the three processes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Role {
     /// The simulator.
@@ -138,12 +138,6 @@ impl Pipeline {
         self.slots.iter().find(|s| s.role == role)?.child.as_ref().map(Child::id)
     }
 
-    /// Seconds since `role` was last started.
-    pub fn uptime(&self, role: Role) -> Option<Duration> {
-        let s = self.slots.iter().find(|s| s.role == role)?;
-        s.child.as_ref().map(|_| s.started.elapsed())
-    }
-
     /// Restarts so far of `role`.
     pub fn restarts(&self, role: Role) -> u32 {
         self.slots.iter().find(|s| s.role == role).map_or(0, |s| s.spawned.saturating_sub(1))
@@ -152,13 +146,6 @@ impl Pipeline {
     /// Whether any role is still running.
     pub fn any_running(&self) -> bool {
         self.slots.iter().any(|s| s.child.is_some())
-    }
-
-    /// Sends `sig` to `role`'s process.
-    pub fn signal(&self, role: Role, sig: Signal) {
-        if let Some(pid) = self.pid(role) {
-            let _ = kill(Pid::from_raw(pid as i32), sig);
-        }
     }
 
     /// SIGKILLs `role` and reaps it (a soak test's crash).

@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::config::Config;
 use iceoryx2::prelude::Service;
 use shm_schemas::service::{ActPublisher, ObsSample, ObsSubscriber, PipelineNode, RunName, list_nodes};
-use shm_schemas::{ObsShape, SeqEvent, SeqTracker};
+use shm_schemas::{Backoff, ObsShape, SeqEvent, SeqTracker};
 
 use crate::batch_env::{BatchEnvironment, EnvError, ObsView};
 
@@ -151,7 +151,8 @@ impl<S: Service> ShmEnv<S> {
         let start = Instant::now();
         let mut next_check = start + Duration::from_millis(50);
         let mut missing_since: Option<Instant> = None;
-        let mut spins = 0u32;
+        let mut backoff = Backoff::new();
+        let mut polls = 0u32;
         loop {
             if let Some(sample) = self.obs.receive()? {
                 let seq = sample.header().seq;
@@ -177,9 +178,9 @@ impl<S: Service> ShmEnv<S> {
                 self.current = Some(sample);
                 return Ok(());
             }
-            spins = spins.wrapping_add(1);
-            if spins % 256 != 0 {
-                std::hint::spin_loop();
+            backoff.snooze();
+            polls = polls.wrapping_add(1);
+            if polls % 256 != 0 {
                 continue;
             }
             let now = Instant::now();
@@ -205,10 +206,6 @@ impl<S: Service> ShmEnv<S> {
                         detail: format!("no observation batch within {timeout:?}"),
                     });
                 }
-            }
-            if now - start > Duration::from_millis(2) {
-                // Past a short spin, give the core back between polls.
-                std::thread::yield_now();
             }
         }
     }

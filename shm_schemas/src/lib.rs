@@ -63,6 +63,7 @@
 #![deny(missing_docs)]
 
 mod action;
+mod backoff;
 mod error;
 mod graph;
 mod plan;
@@ -71,6 +72,7 @@ mod seq;
 pub mod service;
 mod step;
 
+pub use backoff::Backoff;
 pub use action::{ActBatch, ActBatchMut, ActHeader, NUM_ACTIONS};
 pub use error::{Channel, SchemaError, ShmError};
 pub use graph::{GraphEdge, GraphHeader, GraphSnapshot, GraphSnapshotMut, MAX_EDGES, MAX_PIVOTS};

@@ -15,6 +15,14 @@ use crate::world::WorldArgs;
 pub enum BenchCommand {
     /// Batched simulator throughput against a memcpy of the same bytes.
     Sim(BenchSimArgs),
+    /// The three processes over shared memory against the same workload in
+    /// one process and over Unix sockets.
+    Pipeline(super::bench_pipeline::BenchPipelineArgs),
+    /// Route-query latency and all-pairs shortest-path rebuild time.
+    Planner(super::bench_planner::BenchPlannerArgs),
+    /// Internal: the peer end of `bench pipeline`'s socket transport.
+    #[command(hide = true)]
+    SocketPeer(super::bench_pipeline::SocketPeerArgs),
 }
 
 /// `bench sim` options.
@@ -64,6 +72,9 @@ pub struct SimBenchReport {
 /// Runs a `bench` subcommand.
 pub fn run(cmd: BenchCommand) -> anyhow::Result<std::process::ExitCode> {
     match cmd {
+        BenchCommand::Pipeline(a) => return super::bench_pipeline::run(a),
+        BenchCommand::Planner(a) => return super::bench_planner::run(a),
+        BenchCommand::SocketPeer(a) => return super::bench_pipeline::socket_peer(a),
         BenchCommand::Sim(a) => {
             let r = bench_sim(&a)?;
             if a.json {

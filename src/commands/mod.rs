@@ -1,6 +1,9 @@
 //! One module per top-level command.
 
 pub mod bench;
+pub mod bench_pipeline;
+pub mod bench_planner;
 pub mod demo;
 pub mod run;
+pub mod soak;
 pub mod sim;

@@ -110,7 +110,12 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     for h in ["policy", "obs_one_way", "route_client"] {
         lat.register(h);
     }
-    let mut stream_log = std::fs::File::create(ctx.dir.join("learner.stream.jsonl"))?;
+    // Appended by every learner process of the run, one line per second
+    // with its pid: what a soak test sums up even for a killed learner.
+    let mut stream_log =
+        std::fs::OpenOptions::new().create(true).append(true).open(ctx.dir.join("learner.stream.jsonl"))?;
+    let pid = std::process::id();
+    let stream_line = |s: StreamStats| serde_json::json!({ "pid": pid, "stream": s }).to_string();
     let mut planner = PeerWatch::new(PLANNER_NODE);
     let mut actions = vec![0u8; a.envs];
     let (mut batches, mut episodes, mut return_sum) = (0u64, 0u64, 0f64);
@@ -175,11 +180,11 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
             }
         }
         if batches % 64 == 0 && Instant::now() >= next_log {
-            next_log = Instant::now() + Duration::from_secs(1);
-            writeln!(stream_log, "{}", serde_json::to_string(&env.stats())?)?;
+            next_log = Instant::now() + Duration::from_millis(250);
+            writeln!(stream_log, "{}", stream_line(env.stats()))?;
         }
     }
-    writeln!(stream_log, "{}", serde_json::to_string(&env.stats())?)?;
+    writeln!(stream_log, "{}", stream_line(env.stats()))?;
     let stream = env.stats();
     drop((route_client, graph, env));
     ctx.tidy();

@@ -191,11 +191,6 @@ impl PeerWatch {
         }
         PeerEvent::Quiet
     }
-
-    /// Forgets the last check so the next poll looks at the registry.
-    pub fn check_now(&mut self) {
-        self.next_check = Instant::now();
-    }
 }
 
 /// Resident set size of process `pid` in KiB (Linux `/proc`), if readable.

@@ -13,7 +13,7 @@ use anyhow::Context;
 use clap::Args;
 use iceoryx2::prelude::ipc;
 use serde::Serialize;
-use shm_schemas::ObsShape;
+use shm_schemas::{Backoff, ObsShape};
 use shm_schemas::service::PipelineNode;
 use sim::{BatchEnv, StepOut};
 
@@ -57,20 +57,39 @@ pub struct SimReport {
     pub roundtrip_p50_us: f64,
     /// Round trip p99 (µs).
     pub roundtrip_p99_us: f64,
+    /// Round trip p99.9 (µs).
+    pub roundtrip_p999_us: f64,
     /// Step p50 (µs).
     pub step_p50_us: f64,
     /// Why the loop ended.
     pub stopped_by: String,
 }
 
-/// One line of `sim.stats.jsonl`, written every second.
+/// How often a line is appended to `sim.stats.jsonl`.
+const STATS_EVERY: Duration = Duration::from_millis(250);
+
+/// One line of `sim.stats.jsonl`: progress every [`STATS_EVERY`], and a
+/// per-minute round-trip summary (`minute` set) every 60 s.
 #[derive(Debug, Serialize)]
 struct StatsLine {
+    /// Seconds since this sim process published its first batch.
     t: f64,
+    /// Process id (a restarted sim appends to the same file).
+    pid: u32,
+    /// Last published batch.
     seq: u64,
+    /// Env-steps/s over the interval.
     steps_per_sec: f64,
+    /// Round-trip p99 over the interval (µs).
     roundtrip_p99_us: f64,
+    /// Whether the learner's node was alive at the last check.
     learner_alive: bool,
+    /// For per-minute lines: the minute's index since start.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    minute: Option<u64>,
+    /// For per-minute lines: the minute's round-trip p99 (µs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    minute_roundtrip_p99_us: Option<f64>,
 }
 
 /// Runs the sim role until stopped; returns the process exit code.
@@ -99,9 +118,11 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut lat = Latencies::new("sim");
     lat.register("step");
     lat.register("action_round_trip");
-    let mut minute = Latencies::new("sim");
-    minute.register("action_round_trip");
-    let mut stats = std::fs::File::create(ctx.dir.join("sim.stats.jsonl"))?;
+    let mut interval = Latencies::new("sim");
+    interval.register("action_round_trip");
+    let mut minute = interval.clone();
+    let mut stats = std::fs::OpenOptions::new().create(true).append(true).open(ctx.dir.join("sim.stats.jsonl"))?;
+    let pid = std::process::id();
     let mut learner = PeerWatch::new(LEARNER_NODE);
 
     // Batch 0: the first observations, written in place.
@@ -115,13 +136,16 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut sent_at = Instant::now();
     let started = sent_at;
     let (mut env_steps, mut episodes, mut stale) = (0u64, 0u64, 0u64);
-    let mut next_stats = started + Duration::from_secs(1);
+    let mut next_stats = started + STATS_EVERY;
+    let mut next_minute = started + Duration::from_secs(60);
+    let mut minutes = 0u64;
     let (mut last_stats_seq, mut last_stats_t) = (0u64, started);
     let mut stopped_by = "stop request".to_string();
-    let mut spins = 0u32;
 
     'run: loop {
         // Wait for the action batch answering `seq`.
+        let mut backoff = Backoff::new();
+        let mut polls = 0u32;
         let act = loop {
             if let Some(act) = actions.receive()? {
                 if act.header().seq == seq {
@@ -130,9 +154,9 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 stale += 1;
                 continue;
             }
-            spins = spins.wrapping_add(1);
-            if spins % 128 != 0 {
-                std::hint::spin_loop();
+            backoff.snooze();
+            polls = polls.wrapping_add(1);
+            if polls % 128 != 0 {
                 continue;
             }
             if ctx.should_stop() {
@@ -151,16 +175,16 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 PeerEvent::Back => eprintln!("sim: a learner rejoined; continuing at batch {seq}"),
                 PeerEvent::Quiet => {}
             }
-            if sent_at.elapsed() > Duration::from_millis(5) {
+            if backoff.waited() > Backoff::YIELD {
                 // A late or restarted learner gets the waited-for batch from
                 // history when connections are updated.
                 publisher.update_connections()?;
-                std::thread::sleep(Duration::from_micros(200));
             }
         };
         let now = Instant::now();
         let rtt = (now - sent_at).as_nanos() as u64;
         lat.record("action_round_trip", rtt);
+        interval.record("action_round_trip", rtt);
         minute.record("action_round_trip", rtt);
 
         // Step straight into the next loaned sample.
@@ -180,17 +204,27 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
 
         if sent_at >= next_stats {
             let dt = (sent_at - last_stats_t).as_secs_f64();
-            let line = StatsLine {
+            let mut line = StatsLine {
                 t: (sent_at - started).as_secs_f64(),
+                pid,
                 seq,
                 steps_per_sec: (seq - last_stats_seq) as f64 * a.envs as f64 / dt,
-                roundtrip_p99_us: minute.percentile_us("action_round_trip", 99.0),
+                roundtrip_p99_us: interval.percentile_us("action_round_trip", 99.0),
                 learner_alive: !learner.gone,
+                minute: None,
+                minute_roundtrip_p99_us: None,
             };
+            if sent_at >= next_minute {
+                line.minute = Some(minutes);
+                line.minute_roundtrip_p99_us = Some(minute.percentile_us("action_round_trip", 99.0));
+                minute.reset();
+                minutes += 1;
+                next_minute += Duration::from_secs(60);
+            }
             writeln!(stats, "{}", serde_json::to_string(&line)?)?;
-            minute.reset();
+            interval.reset();
             (last_stats_seq, last_stats_t) = (seq, sent_at);
-            next_stats = sent_at + Duration::from_secs(1);
+            next_stats = sent_at + STATS_EVERY;
             if ctx.should_stop() {
                 break;
             }
@@ -210,6 +244,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         episodes,
         roundtrip_p50_us: lat.percentile_us("action_round_trip", 50.0),
         roundtrip_p99_us: lat.percentile_us("action_round_trip", 99.0),
+        roundtrip_p999_us: lat.percentile_us("action_round_trip", 99.9),
         step_p50_us: lat.percentile_us("step", 50.0),
         stopped_by: stopped_by.clone(),
     };

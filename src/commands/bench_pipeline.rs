@@ -1,0 +1,283 @@
+//! `worldgraph bench pipeline`: the pipeline's throughput against the same
+//! workload in one process and over a copying transport, in one run.
+//!
+//! 1. **in-process**: the simulator and the null policy in one loop, no IPC
+//!    (the upper bound).
+//! 2. **ipc**: the three processes over iceoryx2 shared memory (`run`).
+//! 3. **socket**: the same three processes' data flow over Unix domain
+//!    sockets: the sim writes every observation batch (metas + cells) into
+//!    the learner's and the planner's sockets, the learner copies it out,
+//!    picks actions and writes them back.
+//!
+//! Throughput is env-steps per second; round trips are the sim's publish of
+//! observation `k` → receipt of action `k`.
+
+use std::io::{BufRead, Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use learner::batch_env::{BatchEnvironment, InProcess};
+use learner::policy::{Policy, RandomPolicy};
+use serde::Serialize;
+use shm_schemas::EnvMeta;
+use sim::{BatchEnv, StepOut};
+
+use super::run::{RunCmdArgs, teardown};
+use crate::latency::Latencies;
+use crate::roles::OnPeerDeath;
+use crate::roles::learner::PolicyKind;
+use crate::roles::planner::GraphArgs;
+use crate::world::WorldArgs;
+
+/// `bench pipeline` options.
+#[derive(Debug, Clone, Args)]
+pub struct BenchPipelineArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    /// Environments in the batch.
+    #[arg(long, default_value_t = 256)]
+    pub envs: usize,
+    /// Threads stepping the batch (the same in all three setups).
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    /// Seconds measured per setup (after a one-second warm-up).
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Figures of `bench pipeline`.
+#[derive(Debug, Serialize)]
+pub struct PipelineBenchReport {
+    /// Batch size.
+    pub envs: usize,
+    /// Maze.
+    pub maze: String,
+    /// Env-steps/s of the three processes over shared memory.
+    pub ipc_steps_per_sec: f64,
+    /// Env-steps/s of the same workload in one process.
+    pub inprocess_steps_per_sec: f64,
+    /// Env-steps/s over Unix domain sockets.
+    pub socket_steps_per_sec: f64,
+    /// `ipc / inprocess`.
+    pub ipc_to_inprocess: f64,
+    /// `ipc / socket`.
+    pub ipc_to_socket: f64,
+    /// Shared-memory round trip p50 (µs).
+    pub roundtrip_p50_us: f64,
+    /// Shared-memory round trip p99 (µs).
+    pub roundtrip_p99_us: f64,
+    /// Shared-memory round trip p99.9 (µs).
+    pub roundtrip_p999_us: f64,
+    /// Socket round trip p50 (µs).
+    pub socket_roundtrip_p50_us: f64,
+    /// Socket round trip p99 (µs).
+    pub socket_roundtrip_p99_us: f64,
+    /// Batches the learner lost over shared memory (must be 0).
+    pub ipc_batches_lost: u64,
+}
+
+/// Runs the benchmark.
+pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
+    anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
+    let (layout, _) = a.world.build()?;
+    let inprocess = bench_inprocess(&a)?;
+    let (ipc, rtt, lost) = bench_ipc(&a)?;
+    let (socket, srtt) = bench_socket(&a)?;
+    let r = PipelineBenchReport {
+        envs: a.envs,
+        maze: layout.name.clone(),
+        ipc_steps_per_sec: ipc,
+        inprocess_steps_per_sec: inprocess,
+        socket_steps_per_sec: socket,
+        ipc_to_inprocess: ipc / inprocess,
+        ipc_to_socket: ipc / socket,
+        roundtrip_p50_us: rtt.0,
+        roundtrip_p99_us: rtt.1,
+        roundtrip_p999_us: rtt.2,
+        socket_roundtrip_p50_us: srtt.0,
+        socket_roundtrip_p99_us: srtt.1,
+        ipc_batches_lost: lost,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&r)?);
+    } else {
+        println!("bench pipeline: {} maze, {} envs, {} sim thread(s), null policy", r.maze, r.envs, a.threads);
+        println!("  {:<36} {:>14} {:>10}", "setup", "env-steps/s", "ratio");
+        println!("  {:<36} {:>13.2}M {:>10}", "in-process (no IPC)", r.inprocess_steps_per_sec / 1e6, "1.00");
+        println!("  {:<36} {:>13.2}M {:>10.2}", "3 processes, iceoryx2 shared memory", r.ipc_steps_per_sec / 1e6, r.ipc_to_inprocess);
+        println!("  {:<36} {:>13.2}M {:>10.2}", "3 processes, Unix sockets (copying)", r.socket_steps_per_sec / 1e6, socket / inprocess);
+        println!("  {:<36} {:>14.2}", "ipc / socket", r.ipc_to_socket);
+        println!("  round trip (us)            p50        p99      p99.9");
+        println!("  shared memory       {:>10.2} {:>10.2} {:>10.2}", r.roundtrip_p50_us, r.roundtrip_p99_us, r.roundtrip_p999_us);
+        println!("  unix socket         {:>10.2} {:>10.2}", r.socket_roundtrip_p50_us, r.socket_roundtrip_p99_us);
+        println!("  batches lost over shared memory: {}", r.ipc_batches_lost);
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+fn bench_inprocess(a: &BenchPipelineArgs) -> anyhow::Result<f64> {
+    let (layout, cfg) = a.world.build()?;
+    let mut env = InProcess::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
+    let mut policy = RandomPolicy::new(env.num_actions(), a.world.seed);
+    let mut actions = vec![0u8; a.envs];
+    let mut steps = |until: Instant| -> anyhow::Result<u64> {
+        let mut n = 0;
+        while Instant::now() < until {
+            policy.act(&env.observe(), &mut actions);
+            env.step(&actions)?;
+            n += 1;
+        }
+        Ok(n)
+    };
+    steps(Instant::now() + Duration::from_secs(1))?;
+    let t0 = Instant::now();
+    let n = steps(t0 + Duration::from_secs_f64(a.seconds))?;
+    Ok((n * a.envs as u64) as f64 / t0.elapsed().as_secs_f64())
+}
+
+/// Throughput from the sim's per-interval stats, skipping the first second.
+fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64)> {
+    let dir = tempfile::tempdir()?;
+    let run = format!("bench-{}", std::process::id());
+    let args = RunCmdArgs {
+        world: a.world.clone(),
+        graph: GraphArgs { nodes: 32, node_file: None, walks_per_node: 64, walk_len: 64, graph_seed: None },
+        run: run.clone(),
+        run_dir: Some(dir.path().to_path_buf()),
+        on_peer_death: OnPeerDeath::Exit,
+        duration: None,
+        envs: a.envs,
+        threads: a.threads,
+        policy: PolicyKind::Random,
+        route_every: 0,
+        logs_to_files: true,
+    };
+    let mut p = args.pipeline()?;
+    p.start_all()?;
+    std::thread::sleep(Duration::from_secs_f64(a.seconds + 1.5));
+    p.stop_all(Duration::from_secs(3));
+    teardown(&run)?;
+    let stats = std::fs::File::open(dir.path().join("sim.stats.jsonl"))?;
+    let lines: Vec<serde_json::Value> =
+        std::io::BufReader::new(stats).lines().map_while(Result::ok).filter_map(|l| serde_json::from_str(&l).ok()).collect();
+    let first = lines.iter().find(|l| l["t"].as_f64().unwrap_or(0.0) >= 1.0);
+    let (Some(first), Some(last)) = (first, lines.last()) else {
+        anyhow::bail!("the pipeline made no progress; see {}", dir.path().display());
+    };
+    let dt = last["t"].as_f64().unwrap_or(0.0) - first["t"].as_f64().unwrap_or(0.0);
+    let dseq = last["seq"].as_u64().unwrap_or(0) - first["seq"].as_u64().unwrap_or(0);
+    anyhow::ensure!(dt > 0.0, "the pipeline ran for less than two stats intervals");
+    let sim: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("sim.report.json"))?)?;
+    let pct = |k: &str| sim[k].as_f64().unwrap_or(f64::NAN);
+    let hgrm = (pct("roundtrip_p50_us"), pct("roundtrip_p99_us"), pct("roundtrip_p999_us"));
+    let learner: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
+    let lost = learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX);
+    Ok((dseq as f64 * a.envs as f64 / dt, hgrm, lost))
+}
+
+/// One frame on the socket: `seq`, then `N` metas and `N × H × W` cells.
+fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
+    let (layout, cfg) = a.world.build()?;
+    let cpe = layout.width * layout.height;
+    let frame = 8 + a.envs * (std::mem::size_of::<EnvMeta>() + cpe);
+    let dir = tempfile::tempdir()?;
+    let exe = std::env::current_exe()?;
+    let mut peers = Vec::new();
+    let mut streams = Vec::new();
+    for role in ["learner", "planner"] {
+        let path: PathBuf = dir.path().join(format!("{role}.sock"));
+        let listener = UnixListener::bind(&path)?;
+        let child = Command::new(&exe)
+            .args(["bench", "socket-peer", "--socket", &path.display().to_string(), "--role", role])
+            .args(["--frame-bytes", &frame.to_string(), "--envs", &a.envs.to_string()])
+            .args(["--num-actions", &cfg.task.num_actions().to_string()])
+            .stdin(Stdio::null())
+            .spawn()?;
+        peers.push(child);
+        let (s, _) = listener.accept()?;
+        streams.push(s);
+    }
+    let mut batch = BatchEnv::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
+    let mut buf = batch.buffers();
+    batch.reset(buf.out());
+    let mut out = vec![0u8; frame];
+    let mut actions = vec![0u8; a.envs];
+    let mut lat = Latencies::new("socket");
+    let (learner, planner) = (&streams[0], &streams[1]);
+    let mut run_for = |d: Duration, lat: &mut Latencies| -> anyhow::Result<u64> {
+        let until = Instant::now() + d;
+        let mut n = 0u64;
+        while Instant::now() < until {
+            out[..8].copy_from_slice(&n.to_le_bytes());
+            let metas: &[u8] = bytemuck::cast_slice(&buf.meta);
+            out[8..8 + metas.len()].copy_from_slice(metas);
+            out[8 + metas.len()..].copy_from_slice(&buf.cells);
+            let t0 = Instant::now();
+            (&*learner).write_all(&out)?;
+            (&*planner).write_all(&out)?;
+            (&*learner).read_exact(&mut actions)?;
+            lat.record("round_trip", t0.elapsed().as_nanos() as u64);
+            batch.step(&actions, StepOut { cells: &mut buf.cells, meta: &mut buf.meta });
+            n += 1;
+        }
+        Ok(n)
+    };
+    run_for(Duration::from_secs(1), &mut lat)?;
+    lat.reset();
+    let t0 = Instant::now();
+    let n = run_for(Duration::from_secs_f64(a.seconds), &mut lat)?;
+    let sps = (n * a.envs as u64) as f64 / t0.elapsed().as_secs_f64();
+    drop(streams);
+    for mut c in peers {
+        let _ = c.wait();
+    }
+    Ok((sps, (lat.percentile_us("round_trip", 50.0), lat.percentile_us("round_trip", 99.0))))
+}
+
+/// `bench socket-peer` (internal): the learner or planner end of the socket transport.
+#[derive(Debug, Clone, Args)]
+pub struct SocketPeerArgs {
+    /// Socket to connect to.
+    #[arg(long)]
+    pub socket: PathBuf,
+    /// `learner` (answers with actions) or `planner` (reads only).
+    #[arg(long)]
+    pub role: String,
+    /// Bytes per observation frame.
+    #[arg(long)]
+    pub frame_bytes: usize,
+    /// Environments.
+    #[arg(long)]
+    pub envs: usize,
+    /// Actions of the task.
+    #[arg(long)]
+    pub num_actions: usize,
+}
+
+/// Runs a socket peer until the sim closes the socket.
+pub fn socket_peer(a: SocketPeerArgs) -> anyhow::Result<std::process::ExitCode> {
+    let mut s = UnixStream::connect(&a.socket)?;
+    // u64 words keep the metas 4-byte aligned for the cast below.
+    let mut words = vec![0u64; a.frame_bytes.div_ceil(8)];
+    let frame: &mut [u8] = &mut bytemuck::cast_slice_mut(&mut words)[..a.frame_bytes];
+    let mut policy = RandomPolicy::new(a.num_actions, 7);
+    let mut actions = vec![0u8; a.envs];
+    let mut visits = 0u64;
+    while s.read_exact(frame).is_ok() {
+        let metas: &[EnvMeta] = bytemuck::cast_slice(&frame[8..8 + a.envs * std::mem::size_of::<EnvMeta>()]);
+        visits += metas.len() as u64;
+        if a.role == "learner" {
+            let view = learner::batch_env::ObsView { seq: 0, cells: &[], meta: metas, width: 0, height: 0 };
+            policy.act(&view, &mut actions);
+            s.write_all(&actions)?;
+        }
+    }
+    std::hint::black_box(visits);
+    Ok(std::process::ExitCode::SUCCESS)
+}

@@ -1,0 +1,316 @@
+//! `worldgraph soak`: the three processes for M minutes on this machine,
+//! optionally SIGKILLing a random one every S seconds, with a report of what
+//! a long run must not do: lose or reorder batches, grow in memory, leave
+//! shared memory behind, or fail to recover.
+//!
+//! - **Lost / reordered** batches come from every learner process's stream
+//!   accounting (`learner.stream.jsonl`, one line per 250 ms with its pid,
+//!   so a killed learner's count survives it).
+//! - **Memory growth**: each process's resident set, sampled every second;
+//!   growth is the last sample minus the one 30 s into that process's life.
+//! - **Recovery** after a kill: the time until the sim publishes batches
+//!   again with a learner answering (progress in `sim.stats.jsonl` after the
+//!   restart).
+//! - **Round-trip p99 per minute**: the sim's per-minute lines.
+//! - **Shared memory left behind**: the run's `/dev/shm` files after teardown.
+//!
+//! Exits non-zero when anything was lost, reordered, leaked or left behind,
+//! or a recovery failed.
+
+use std::collections::BTreeMap;
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+
+use super::run::{RunCmdArgs, stop_flag, teardown};
+use crate::pipeline::Role;
+use crate::roles::OnPeerDeath;
+use crate::roles::learner::PolicyKind;
+use crate::roles::planner::GraphArgs;
+use crate::roles::rss_kib;
+use crate::world::WorldArgs;
+
+/// Growth of a process's resident set above which the soak fails (KiB).
+pub const RSS_GROWTH_LIMIT_KIB: i64 = 16 * 1024;
+/// How long a recovery may take before it counts as failed.
+pub const RECOVERY_LIMIT: Duration = Duration::from_secs(30);
+
+/// `soak` options.
+#[derive(Debug, Clone, Args)]
+pub struct SoakArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    /// Minutes to run.
+    #[arg(long, default_value_t = 10.0)]
+    pub minutes: f64,
+    /// SIGKILL a random process (sim, learner or planner) every this many seconds.
+    #[arg(long)]
+    pub kill_every: Option<f64>,
+    /// Environments in the batch.
+    #[arg(long, default_value_t = 256)]
+    pub envs: usize,
+    /// The learner asks the planner for a route every this many batches.
+    #[arg(long, default_value_t = 1000)]
+    pub route_every: u64,
+    /// Run directory [default: runs/soak-<pid>].
+    #[arg(long)]
+    pub run_dir: Option<PathBuf>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One kill and what followed.
+#[derive(Debug, Serialize)]
+pub struct Recovery {
+    /// Seconds into the soak.
+    pub at_s: f64,
+    /// The process killed.
+    pub role: Role,
+    /// Seconds from the kill until batches flowed again (None: not within the limit).
+    pub recovered_after_s: Option<f64>,
+}
+
+/// The soak report.
+#[derive(Debug, Serialize)]
+pub struct SoakReport {
+    /// Minutes run.
+    pub minutes: f64,
+    /// Batches published by all sim processes.
+    pub batches: u64,
+    /// Batches lost (learner streams).
+    pub lost: u64,
+    /// Batches reordered (learner streams).
+    pub reordered: u64,
+    /// Times a learner saw the sim start over.
+    pub sim_restarts_seen: u64,
+    /// Kills and recoveries.
+    pub recoveries: Vec<Recovery>,
+    /// Largest resident-set growth per role (KiB), over processes that lived ≥ 60 s.
+    pub rss_growth_kib: BTreeMap<String, i64>,
+    /// Largest resident set per role (KiB).
+    pub rss_max_kib: BTreeMap<String, u64>,
+    /// Round-trip p99 (µs) per minute, from the sim.
+    pub roundtrip_p99_us_per_minute: Vec<f64>,
+    /// The run's shared-memory files left after teardown.
+    pub shm_left_behind: Vec<String>,
+    /// Everything held.
+    pub ok: bool,
+}
+
+#[derive(Debug, Default)]
+struct ProcMem {
+    started: Option<Instant>,
+    baseline: Option<u64>,
+    last: u64,
+    max: u64,
+}
+
+fn last_progress(path: &Path) -> Option<(u32, u64)> {
+    let f = std::fs::File::open(path).ok()?;
+    let line = std::io::BufReader::new(f).lines().map_while(Result::ok).filter(|l| !l.is_empty()).last()?;
+    let v: serde_json::Value = serde_json::from_str(&line).ok()?;
+    Some((v["pid"].as_u64()? as u32, v["seq"].as_u64()?))
+}
+
+/// Runs the soak.
+pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
+    anyhow::ensure!(a.minutes > 0.0, "--minutes must be positive");
+    if let Some(k) = a.kill_every {
+        anyhow::ensure!(k >= 2.0, "--kill-every must be at least 2 seconds");
+    }
+    let run = format!("soak-{}", std::process::id());
+    let dir = a.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(&run));
+    let args = RunCmdArgs {
+        world: a.world.clone(),
+        graph: GraphArgs { nodes: 32, node_file: None, walks_per_node: 128, walk_len: 64, graph_seed: None },
+        run: run.clone(),
+        run_dir: Some(dir.clone()),
+        on_peer_death: OnPeerDeath::Wait,
+        duration: None,
+        envs: a.envs,
+        threads: 1,
+        policy: PolicyKind::Random,
+        route_every: a.route_every,
+        logs_to_files: true,
+    };
+    let stop = stop_flag()?;
+    let mut p = args.pipeline()?;
+    p.start_all()?;
+    let start = Instant::now();
+    let end = start + Duration::from_secs_f64(a.minutes * 60.0);
+    let mut rng = SmallRng::seed_from_u64(a.world.seed);
+    let mut next_kill = a.kill_every.map(|k| start + Duration::from_secs_f64(k));
+    let mut pending: Option<(usize, Instant, Option<(u32, u64)>)> = None;
+    let mut recoveries: Vec<Recovery> = Vec::new();
+    let mut mem: BTreeMap<(Role, u32), ProcMem> = BTreeMap::new();
+    let mut next_sample = start;
+    let stats = dir.join("sim.stats.jsonl");
+    let bar = indicatif::ProgressBar::new((a.minutes * 60.0) as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("soak {bar:40} {pos}/{len} s  {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    while Instant::now() < end && !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(50));
+        let now = Instant::now();
+        for (role, status) in p.poll_exited() {
+            bar.println(format!("soak: the {} process exited ({status}); restarting it", role.name()));
+            p.spawn(role)?;
+        }
+        if now >= next_sample {
+            next_sample = now + Duration::from_secs(1);
+            for role in Role::ALL {
+                if let Some(pid) = p.pid(role)
+                    && let Some(rss) = rss_kib(pid)
+                {
+                    let m = mem.entry((role, pid)).or_default();
+                    let born = *m.started.get_or_insert(now);
+                    if m.baseline.is_none() && now - born >= Duration::from_secs(30) {
+                        m.baseline = Some(rss);
+                    }
+                    m.last = rss;
+                    m.max = m.max.max(rss);
+                }
+            }
+            bar.set_position((now - start).as_secs());
+            bar.set_message(format!("kills {}", recoveries.len() + usize::from(pending.is_some())));
+        }
+        // A pending recovery: batches flow again once the sim's progress
+        // moved past what it was right after the restart.
+        if let Some((i, killed_at, before)) = pending {
+            let progress = last_progress(&stats);
+            let moved = match (before, progress) {
+                (Some((pid0, seq0)), Some((pid1, seq1))) => pid1 != pid0 || seq1 > seq0 + 2,
+                (None, Some(_)) => true,
+                _ => false,
+            };
+            // A restarted sim appends from seq 0: any two lines of it count.
+            if moved && now - killed_at > Duration::from_millis(300) {
+                let settle = last_progress(&stats);
+                std::thread::sleep(Duration::from_millis(300));
+                if last_progress(&stats) != settle {
+                    recoveries[i].recovered_after_s = Some((Instant::now() - killed_at).as_secs_f64());
+                    pending = None;
+                }
+            } else if now - killed_at > RECOVERY_LIMIT {
+                bar.println(format!("soak: no recovery within {RECOVERY_LIMIT:?} after killing the {}", recoveries[i].role.name()));
+                pending = None;
+            }
+        }
+        if pending.is_none()
+            && let Some(k) = next_kill
+            && now >= k
+        {
+            let role = Role::ALL[rng.random_range(0..Role::ALL.len())];
+            let before = last_progress(&stats);
+            p.kill_hard(role)?;
+            let killed_at = Instant::now();
+            bar.println(format!("soak: {:>6.1} s  SIGKILL {}", (killed_at - start).as_secs_f64(), role.name()));
+            p.spawn(role)?;
+            recoveries.push(Recovery { at_s: (killed_at - start).as_secs_f64(), role, recovered_after_s: None });
+            pending = Some((recoveries.len() - 1, killed_at, before));
+            next_kill = a.kill_every.map(|s| killed_at + Duration::from_secs_f64(s));
+        }
+    }
+    bar.finish_and_clear();
+    p.stop_all(Duration::from_secs(5));
+    let left: Vec<String> = teardown(&run)?.iter().map(|p| p.display().to_string()).collect();
+
+    // Lost / reordered: the last line of every learner process.
+    let mut per_pid: BTreeMap<u64, serde_json::Value> = BTreeMap::new();
+    if let Ok(f) = std::fs::File::open(dir.join("learner.stream.jsonl")) {
+        for l in std::io::BufReader::new(f).lines().map_while(Result::ok) {
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&l)
+                && let Some(pid) = v["pid"].as_u64()
+            {
+                per_pid.insert(pid, v["stream"].clone());
+            }
+        }
+    }
+    let sum = |k: &str| per_pid.values().map(|s| s[k].as_u64().unwrap_or(0)).sum::<u64>();
+    let (lost, reordered, sim_restarts_seen) = (sum("lost"), sum("reordered"), sum("sim_restarts"));
+
+    let (mut batches, mut per_minute) = (0u64, Vec::new());
+    let mut last_seq: BTreeMap<u64, u64> = BTreeMap::new();
+    if let Ok(f) = std::fs::File::open(&stats) {
+        for l in std::io::BufReader::new(f).lines().map_while(Result::ok) {
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&l) {
+                last_seq.insert(v["pid"].as_u64().unwrap_or(0), v["seq"].as_u64().unwrap_or(0));
+                if let Some(p99) = v["minute_roundtrip_p99_us"].as_f64() {
+                    per_minute.push(p99);
+                }
+            }
+        }
+    }
+    batches += last_seq.values().map(|s| s + 1).sum::<u64>();
+    let mut growth: BTreeMap<String, i64> = BTreeMap::new();
+    let mut max_rss: BTreeMap<String, u64> = BTreeMap::new();
+    for ((role, _), m) in &mem {
+        let e = max_rss.entry(role.name().into()).or_default();
+        *e = (*e).max(m.max);
+        if let (Some(b), Some(st)) = (m.baseline, m.started)
+            && st.elapsed() >= Duration::from_secs(60)
+        {
+            let g = growth.entry(role.name().into()).or_insert(i64::MIN);
+            *g = (*g).max(m.last as i64 - b as i64);
+        }
+    }
+    let failed_recoveries = recoveries.iter().filter(|r| r.recovered_after_s.is_none()).count();
+    let leaked = growth.values().any(|&g| g > RSS_GROWTH_LIMIT_KIB);
+    let ok = lost == 0 && reordered == 0 && left.is_empty() && !leaked && failed_recoveries == 0 && batches > 0;
+    let report = SoakReport {
+        minutes: (Instant::now() - start).as_secs_f64() / 60.0,
+        batches,
+        lost,
+        reordered,
+        sim_restarts_seen,
+        recoveries,
+        rss_growth_kib: growth,
+        rss_max_kib: max_rss,
+        roundtrip_p99_us_per_minute: per_minute,
+        shm_left_behind: left,
+        ok,
+    };
+    sim::render::write_atomic(&dir.join("soak.report.json"), &serde_json::to_vec_pretty(&report)?)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_report(&report, &dir);
+    }
+    Ok(if ok { std::process::ExitCode::SUCCESS } else { std::process::ExitCode::FAILURE })
+}
+
+fn print_report(r: &SoakReport, dir: &Path) {
+    println!("soak report ({})", dir.display());
+    println!("  {:<34} {:>12.1}", "minutes", r.minutes);
+    println!("  {:<34} {:>12}", "batches published", r.batches);
+    println!("  {:<34} {:>12}", "batches lost", r.lost);
+    println!("  {:<34} {:>12}", "batches reordered", r.reordered);
+    println!("  {:<34} {:>12}", "sim restarts seen by learners", r.sim_restarts_seen);
+    for (role, g) in &r.rss_growth_kib {
+        println!("  {:<34} {:>12}", format!("{role} RSS growth (KiB)"), g);
+    }
+    for (role, m) in &r.rss_max_kib {
+        println!("  {:<34} {:>12}", format!("{role} RSS max (KiB)"), m);
+    }
+    let p99: Vec<String> = r.roundtrip_p99_us_per_minute.iter().map(|v| format!("{v:.0}")).collect();
+    println!("  {:<34} {}", "round-trip p99 per minute (us)", p99.join(" "));
+    println!("  {:<34} {:>12}", "shared-memory files left behind", r.shm_left_behind.len());
+    if !r.recoveries.is_empty() {
+        println!("  kills:");
+        for k in &r.recoveries {
+            match k.recovered_after_s {
+                Some(s) => println!("    {:>7.1} s  {:<8} recovered after {:.2} s", k.at_s, k.role.name(), s),
+                None => println!("    {:>7.1} s  {:<8} NOT recovered", k.at_s, k.role.name()),
+            }
+        }
+    }
+    println!("  result: {}", if r.ok { "OK" } else { "FAILED" });
+}
