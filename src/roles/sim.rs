@@ -74,6 +74,8 @@ const STATS_EVERY: Duration = Duration::from_millis(250);
 struct StatsLine {
     /// Seconds since this sim process published its first batch.
     t: f64,
+    /// Wall-clock time (ms since the Unix epoch), to line up restarted sims.
+    unix_ms: u64,
     /// Process id (a restarted sim appends to the same file).
     pid: u32,
     /// Last published batch.
@@ -206,6 +208,9 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             let dt = (sent_at - last_stats_t).as_secs_f64();
             let mut line = StatsLine {
                 t: (sent_at - started).as_secs_f64(),
+                unix_ms: std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_millis() as u64),
                 pid,
                 seq,
                 steps_per_sec: (seq - last_stats_seq) as f64 * a.envs as f64 / dt,
