@@ -749,6 +749,8 @@ pub struct PipelineNode<S: Service> {
     node: Node<S>,
     run: RunName,
     retry_timeout: Duration,
+    /// Set once this node opened any of the run's services.
+    opened: Cell<bool>,
 }
 
 impl<S: Service> PipelineNode<S> {
@@ -762,6 +764,7 @@ impl<S: Service> PipelineNode<S> {
             node: create_node(config, node_name)?,
             run,
             retry_timeout: DEFAULT_RETRY_TIMEOUT,
+            opened: Cell::new(false),
         })
     }
 
@@ -784,6 +787,44 @@ impl<S: Service> PipelineNode<S> {
     /// Removes stale resources of dead nodes under this node's prefix.
     pub fn cleanup_dead_nodes(&self) -> CleanupState {
         self.node.try_cleanup_dead_nodes()
+    }
+
+    /// Last resort after a crash *during service creation* left a service
+    /// that can no longer be opened (`ServiceInCorruptedState` or
+    /// `HangsInCreation` until the retry budget runs out, iceoryx2 issue
+    /// #1584): removes the run's four services by force. Refused with
+    /// [`ShmError::StillInUse`] while any other node of the prefix is alive;
+    /// call it at start-up, before this node opens any port. Returns the
+    /// number of services removed.
+    pub fn force_remove_stale_services(&self) -> Result<usize, ShmError> {
+        if self.opened.get() {
+            return Err(ShmError::Ipc {
+                op: "force remove services",
+                service: self.run.to_string(),
+                detail: "this node already opened services of the run; call it first thing".into(),
+            });
+        }
+        let mut services = Vec::new();
+        for channel in Channel::ALL {
+            let pattern = if channel == Channel::Route {
+                MessagingPattern::RequestResponse
+            } else {
+                MessagingPattern::PublishSubscribe
+            };
+            services.push((service_name(&self.run, channel)?, pattern));
+        }
+        match crate::raw::force_remove_services(&self.node, &services) {
+            Ok(Ok(n)) => Ok(n),
+            Ok(Err(detail)) => Err(ShmError::Ipc {
+                op: "force remove services",
+                service: self.run.to_string(),
+                detail,
+            }),
+            Err(alive) => Err(ShmError::StillInUse {
+                prefix: config_prefix(self.node.config()),
+                alive,
+            }),
+        }
     }
 
     /// Runs `f` until it succeeds, a non-transient error occurs, or the retry
@@ -821,6 +862,10 @@ impl<S: Service> PipelineNode<S> {
             std::thread::sleep(delay);
             delay = (delay * 2).min(Duration::from_millis(64));
         }
+    }
+
+    fn mark_opened(&self) {
+        self.opened.set(true);
     }
 
     fn open_failed<E: Debug>(
@@ -874,6 +919,7 @@ impl<S: Service> PipelineNode<S> {
             ],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -950,6 +996,7 @@ impl<S: Service> PipelineNode<S> {
             ],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -1028,6 +1075,7 @@ impl<S: Service> PipelineNode<S> {
             attrs: vec![(ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string())],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -1100,6 +1148,7 @@ impl<S: Service> PipelineNode<S> {
             ],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",

@@ -654,6 +654,37 @@ fn dead_publisher_is_detected_and_replaced() {
 }
 
 #[test]
+fn force_removal_of_a_crashed_runs_services() {
+    let _w = Watchdog::arm("force_removal_of_a_crashed_runs_services");
+    let t = TestPrefix::new("force");
+    let status = reap(spawn_child("crash", &t));
+    assert!(!status.success());
+    let sim = node(&t, "sim");
+    // Node creation cleaned the dead node up already; whatever is left of
+    // the run's services goes, and the run starts afresh.
+    let removed = sim.force_remove_stale_services().unwrap();
+    assert!(removed <= 1, "{removed}");
+    let shape = ObsShape::new(
+        TWO_PROCESS_SHAPE.0,
+        TWO_PROCESS_SHAPE.1,
+        TWO_PROCESS_SHAPE.2,
+    )
+    .unwrap();
+    let _publisher = sim.obs_publisher(shape).unwrap();
+
+    // Refused once the node has opened ports, and while other nodes live.
+    assert!(matches!(
+        sim.force_remove_stale_services(),
+        Err(ShmError::Ipc { .. })
+    ));
+    let fresh = node(&t, "learner");
+    assert!(matches!(
+        fresh.force_remove_stale_services(),
+        Err(ShmError::StillInUse { alive: 1, .. })
+    ));
+}
+
+#[test]
 fn obs_memory_scales_with_the_shape() {
     let _w = Watchdog::arm("obs_memory_scales_with_the_shape");
     // Chunks per obs publisher: subscribers × (buffer + borrowed) + history + loans.
