@@ -12,7 +12,7 @@
 //!   planner ── wg/<run>/graph (GraphHeader + nodes + edges, latest only) ──► learner, viewers
 //! ```
 //!
-//! - [`step`](crate::ObsHeader): the observation batch. [`EnvMeta`] is the
+//! - [`ObsHeader`]: the observation batch. [`EnvMeta`] is the
 //!   per-environment record; [`ObsShape`] the run's batch and grid size;
 //!   [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,
 //!   &mut [EnvMeta], &mut [u8])` so the simulator steps straight into shared

@@ -1275,7 +1275,10 @@ impl<S: Service> ObsPublisher<S> {
         })
     }
 
-    /// Connects subscribers that joined since the last send (delivers history).
+    /// Connects subscribers that joined since the last send and delivers
+    /// the history (the last batch) to them. iceoryx2 has no background
+    /// thread: call this periodically while waiting for an action batch,
+    /// so a learner that (re)joins receives the batch the sim waits on.
     pub fn update_connections(&self) -> Result<(), ShmError> {
         self.publisher
             .update_connections()
@@ -1581,7 +1584,11 @@ impl<S: Service> RouteCall<S> {
     }
 }
 
-/// The learner's route client.
+/// The learner's route client. At most [`ROUTE_MAX_ACTIVE_REQUESTS`]
+/// requests may be pending at once (more: `Err` from
+/// [`request`](Self::request)); dropping a [`PendingRoute`] frees its slot
+/// and withdraws the request (a request withdrawn before the planner
+/// received it is never delivered).
 #[derive(Debug)]
 pub struct RouteClient<S: Service> {
     client: Client<S, RouteRequest, (), RouteResponse, ()>,

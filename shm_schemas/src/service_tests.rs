@@ -16,7 +16,10 @@ const CHILD_ROLE: &str = "WG_SHM_TEST_CHILD";
 const CHILD_PREFIX: &str = "WG_SHM_TEST_PREFIX";
 const CHILD_RUN: &str = "WG_SHM_TEST_RUN";
 /// Upper bound for anything that waits on another port or process.
-const WATCHDOG: Duration = Duration::from_secs(30);
+const WATCHDOG: Duration = Duration::from_secs(10);
+/// The process-wide backstop behind [`WATCHDOG`] (which fails a test with
+/// a message): ends the process if a test hangs in a blocking call.
+const HARD_WATCHDOG: Duration = Duration::from_secs(60);
 
 /// Ends the whole process if a test hangs (a deadlock is reported as a
 /// failure, never waited out); disarmed on drop.
@@ -28,8 +31,8 @@ impl Watchdog {
     fn arm(what: &'static str) -> Watchdog {
         let (tx, rx) = mpsc::channel::<()>();
         std::thread::spawn(move || {
-            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(WATCHDOG) {
-                eprintln!("watchdog: `{what}` still running after {WATCHDOG:?}, aborting");
+            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(HARD_WATCHDOG) {
+                eprintln!("watchdog: `{what}` still running after {HARD_WATCHDOG:?}, aborting");
                 std::process::exit(101);
             }
         });
@@ -257,6 +260,44 @@ fn route_roundtrip() {
     assert_eq!(
         (reply.status(), reply.actions().len()),
         (Some(RouteStatus::TooLong), 0)
+    );
+}
+
+#[test]
+fn route_edge_cases() {
+    let _w = Watchdog::arm("route_edge_cases");
+    let t = TestPrefix::new("routex");
+    let (planner, learner) = (node(&t, "planner"), node(&t, "learner"));
+    let server = planner.route_server().unwrap();
+
+    // A client that gave up before the answer: responding is harmless.
+    let client = learner.route_client().unwrap();
+    let pending = client.request(0, 1, 0, 1).unwrap();
+    let call = poll("route request", || server.receive().unwrap());
+    drop(pending);
+    assert!(!call.is_connected());
+    call.respond(1, RouteStatus::Unreachable, &[], &[], &[])
+        .unwrap();
+
+    // A request of another schema version is answered BadRequest and reported.
+    let (_, service) = learner.route_service().unwrap();
+    let raw_client = service.client_builder().create().unwrap();
+    let mut bad = RouteRequest::new(77, run().id(), 0, 1, 0, 1);
+    bad.schema_version = 9;
+    let pending = raw_client.send_copy(bad).unwrap();
+    let err = poll("bad request", || match server.receive() {
+        Ok(None) => None,
+        other => Some(other),
+    })
+    .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "route request/response schema v9 on the wire, this process speaks v1"
+    );
+    let answer = poll("bad request answer", || pending.receive().unwrap());
+    assert_eq!(
+        (answer.status(), answer.request_id),
+        (Some(RouteStatus::BadRequest), 77)
     );
 }
 
