@@ -8,9 +8,10 @@ use sim::Task;
 
 use crate::error::PlannerError;
 
-/// Most nodes a graph may have: ids are `u16` and the wire format reserves
-/// `u16::MAX` for "no pivot"; the largest grid (64 × 64) has fewer cells.
-pub const MAX_NODES: usize = 4096;
+/// Most nodes a graph may have: the wire format's limit (one per cell of
+/// the largest grid); ids are `u16`, with `u16::MAX` reserved for "no pivot".
+pub const MAX_NODES: usize = shm_schemas::MAX_PIVOTS;
+const _: () = assert!(MAX_NODES < shm_schemas::NO_PIVOT as usize);
 
 /// Where the graph's nodes come from (paper section 4, "Wide-then-Narrow":
 /// `V_all`, `V_rand` or `V_p`).
@@ -35,6 +36,25 @@ pub enum CandidateSet {
     Given,
 }
 
+/// How edges are found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EdgeSearch {
+    /// The paper's method: random walks from every node
+    /// ([`crate::edges::discover_edges`]).
+    #[default]
+    RandomWalks,
+    /// Every edge random walks could ever find, by a search over states
+    /// ([`crate::edges::exhaustive_edges_from`]): the limit of unboundedly
+    /// many walks. Denser than the walks' graph (in an open room every pair
+    /// of nodes is joined by some path around the others, though walks
+    /// nearly always meet the nearest node first); for sparse node sets in
+    /// large mazes where walks of a practical length miss long edges, and
+    /// for the paper's "all pre-requisites granted" comparison of `V_rand`
+    /// (section 4, footnote on `V_rand`).
+    Exhaustive,
+}
+
 /// Settings of world-graph construction. `#[serde(default)]`: a partial
 /// JSON object fills the rest from [`PlannerConfig::default`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -51,6 +71,8 @@ pub struct PlannerConfig {
     /// Most actions per random walk; a walk also stops at the first node
     /// it reaches or when its episode ends (exit, lava).
     pub walk_len: u32,
+    /// Random walks (the paper) or the exhaustive search.
+    pub edge_search: EdgeSearch,
     /// Shorten every discovered edge with an exact breadth-first search
     /// that does not touch a third node ([`crate::edges::shorten_edge`]),
     /// standing in for the paper's refinement by `π_g`.
@@ -68,7 +90,8 @@ impl Default for PlannerConfig {
             candidates: CandidateSet::Random { k: 32 },
             seed: 0,
             walks_per_node: 512,
-            walk_len: 128,
+            walk_len: 512,
+            edge_search: EdgeSearch::RandomWalks,
             shorten: true,
             task: Task::MultiGoal,
         }

@@ -46,7 +46,7 @@ pub mod pivotal;
 pub mod shortest_path;
 pub mod world_graph;
 
-pub use config::{CandidateSet, MAX_NODES, PlannerConfig};
+pub use config::{CandidateSet, EdgeSearch, MAX_NODES, PlannerConfig};
 pub use coverage::Coverage;
 pub use edges::{EdgePath, EdgeWorld};
 pub use error::PlannerError;

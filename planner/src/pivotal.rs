@@ -51,7 +51,7 @@ pub fn v_rand(layout: &Layout, k: usize, seed: u64) -> Result<Vec<CellIdx>, Plan
     if k > all.len() {
         return Err(PlannerError::NotEnoughCells { requested: k, available: all.len() });
     }
-    let mut rng = SmallRng::seed_from_u64(sim::env_seed(seed, 0x5652_414e_44)); // "VRAND"
+    let mut rng = SmallRng::seed_from_u64(sim::env_seed(seed, 0x0056_5241_4e44)); // "VRAND"
     let (chosen, _) = all.partial_shuffle(&mut rng, k);
     let mut chosen = chosen.to_vec();
     chosen.sort_unstable();
@@ -131,7 +131,7 @@ pub fn check_nodes(layout: &Layout, cells: &[CellIdx]) -> Result<Vec<CellIdx>, P
 pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<CellIdx>, PlannerError> {
     let err = |line: usize, message: String| PlannerError::NodeList { source_name: source.to_string(), line, message };
     let trimmed = text.trim_start();
-    let pairs: Vec<(i64, i64, usize)> = if trimmed.starts_with('[') || trimmed.starts_with('{') {
+    let pairs: Vec<ListedCell> = if trimmed.starts_with('[') || trimmed.starts_with('{') {
         parse_json_pairs(text).map_err(|(line, m)| err(line, m))?
     } else {
         let mut pairs = Vec::new();
@@ -175,8 +175,12 @@ pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<
     })
 }
 
-/// `(x, y, line)` triples of a JSON node list; errors as `(line, message)`.
-fn parse_json_pairs(text: &str) -> Result<Vec<(i64, i64, usize)>, (usize, String)> {
+/// `(x, y, line)` of one listed cell.
+type ListedCell = (i64, i64, usize);
+
+/// The cells of a JSON node list (line 0: JSON values carry no line);
+/// errors as `(line, message)`.
+fn parse_json_pairs(text: &str) -> Result<Vec<ListedCell>, (usize, String)> {
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| (e.line(), format!("invalid JSON: {e}")))?;
     let list = match &value {
         serde_json::Value::Array(a) => a,

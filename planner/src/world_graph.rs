@@ -125,6 +125,24 @@ impl Route {
     pub fn world_after(&self) -> RouteWorld {
         self.world_after
     }
+
+    /// Copies the route into wire-format arrays (a route response's
+    /// `pivots`, `cells` and `actions`) and returns `(num_pivots,
+    /// num_actions)`, or `None`, writing nothing, when it does not fit.
+    pub fn write_wire(&self, pivots: &mut [u16], cells: &mut [u32], actions: &mut [u8]) -> Option<(usize, usize)> {
+        let (np, na) = (self.nodes.len(), self.actions.len());
+        if np > pivots.len() || na > cells.len() || na > actions.len() {
+            return None;
+        }
+        for (w, n) in pivots.iter_mut().zip(&self.nodes) {
+            *w = n.0;
+        }
+        for (w, c) in cells.iter_mut().zip(&self.cells) {
+            *w = c.0;
+        }
+        actions[..na].copy_from_slice(&self.actions);
+        Some((np, na))
+    }
 }
 
 /// What the route replay needs to know about an edge.
@@ -862,14 +880,17 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig { cases: 48, rng_seed: proptest::test_runner::RngSeed::Fixed(3), ..ProptestConfig::default() })]
 
-        /// On random layouts with doors and keys: DP distances equal
-        /// Dijkstra over the same edges, the triangle inequality holds, and
-        /// every route replays in a fresh simulator onto its target.
+        /// On random layouts with doors and keys, with edges from walks or
+        /// from the exhaustive search: DP distances equal Dijkstra over the
+        /// same edges, the triangle inequality holds, and every route
+        /// replays in a fresh simulator onto its target.
         #[test]
-        fn random_layouts_dp_matches_reference_and_routes_execute(seed in any::<u64>(), k in 2usize..10) {
+        fn random_layouts_dp_matches_reference_and_routes_execute(seed in any::<u64>(), k in 2usize..10, exhaustive in any::<bool>()) {
             let layout = random_layout(seed);
             let k = k.min(crate::pivotal::v_all(&layout).len());
-            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k }, seed), &[]).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            let edge_search = if exhaustive { crate::EdgeSearch::Exhaustive } else { crate::EdgeSearch::RandomWalks };
+            let c = PlannerConfig { edge_search, ..cfg(CandidateSet::Random { k }, seed) };
+            let g = WorldGraph::build(&layout, &c, &[]).map_err(|e| TestCaseError::fail(e.to_string()))?;
             check_graph(&g)?;
         }
 
@@ -1035,8 +1056,38 @@ mod tests {
         assert!(r.is_empty() && r.start().is_none());
         assert_eq!(g.route_into(NodeId(1), 2, NodeId(1), &mut r).expect("trivial route"), 0);
         assert_eq!(r.nodes(), &[NodeId(1)]);
+        let e = g.route_into(NodeId(0), 0, NodeId(1), &mut r).expect_err("unreachable");
+        assert_eq!(e.route_status(), shm_schemas::RouteStatus::Unreachable);
+        let e = g.route_from_pose_into(Pose { x: 0, y: 0, dir: 0 }, NodeId(0), g.initial_world(), &mut r).expect_err("a wall");
+        assert_eq!(e.route_status(), shm_schemas::RouteStatus::StartNotOnGraph);
+        // Wire copy: fits or writes nothing.
+        g.route_from_pose_into(Pose { x: 1, y: 1, dir: 2 }, NodeId(0), g.initial_world(), &mut r).expect("route");
+        // Turn around (two turns either way), then one step onto node 0.
+        assert_eq!(r.len(), 3);
+        assert!(r.actions()[0] == r.actions()[1] && r.actions()[0] != action::FORWARD && r.actions()[2] == action::FORWARD);
+        let (mut p, mut c, mut a) = ([7u16; 4], [7u32; 4], [7u8; 4]);
+        assert_eq!(r.write_wire(&mut p, &mut c, &mut a), Some((1, 3)));
+        assert_eq!((p[0], &c[..3], &a[..3]), (0, &[8u32, 8, 9][..], r.actions()));
+        assert_eq!(r.write_wire(&mut p, &mut c[..2], &mut a), None);
         let two_keys = Layout::parse("k", "#######\n#>KK.E#\n#######\n").expect("valid");
         assert!(matches!(WorldGraph::build(&two_keys, &cfg(CandidateSet::All, 0), &[]), Err(PlannerError::UnsupportedLayout { .. })));
+    }
+
+    /// How much of each embedded maze the default walks connect; run with
+    /// `cargo test --release -p planner -- --ignored --nocapture connectivity`.
+    #[test]
+    #[ignore = "prints a report; not a correctness test"]
+    fn connectivity_report() {
+        for maze in Maze::ALL {
+            for k in [16, 32, 64] {
+                let layout = maze.layout(false);
+                let t = std::time::Instant::now();
+                let g = WorldGraph::build(&layout, &PlannerConfig { candidates: CandidateSet::Random { k }, ..PlannerConfig::default() }, &[]).expect("graph");
+                let n = g.num_nodes();
+                let pairs = (0..n * n).filter(|&i| g.distance(NodeId((i / n) as u16), NodeId((i % n) as u16)) != UNREACHABLE).count();
+                println!("{} k={k}: {} edges, {:.1}% of pairs connected, built in {:.2?}", layout.name, g.edges().len(), 100.0 * pairs as f64 / (n * n) as f64, t.elapsed());
+            }
+        }
     }
 
     /// Timing figures for the closing note; run with
