@@ -294,8 +294,27 @@ pub fn harden_shm_permissions(prefix: &str) -> Result<Vec<PathBuf>, ShmError> {
 }
 
 /// `/dev/shm/<prefix>*` files with their permission bits.
+///
+/// iceoryx2 names them `<prefix><40 hex digits>` followed by `_` or `.`;
+/// only such names count, so the files of run `a_b` are not mistaken for
+/// files of run `a` (whose prefix `wg_a_` is a prefix of `wg_a_b_`).
 pub fn shm_files(prefix: &str) -> Result<Vec<(PathBuf, u32)>, ShmError> {
-    files_with_prefix(StdPath::new(SHM_DIR), prefix)
+    let mut files = files_with_prefix(StdPath::new(SHM_DIR), prefix)?;
+    files.retain(|(path, _)| {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        is_iceoryx2_name_after_prefix(name.as_bytes().get(prefix.len()..).unwrap_or_default())
+    });
+    Ok(files)
+}
+
+/// `<40 hex digits>` then `_` or `.`: the hash iceoryx2 puts after the prefix.
+fn is_iceoryx2_name_after_prefix(rest: &[u8]) -> bool {
+    rest.len() > 40
+        && rest[..40].iter().all(u8::is_ascii_hexdigit)
+        && matches!(rest[40], b'_' | b'.')
 }
 
 fn files_with_prefix(dir: &StdPath, prefix: &str) -> Result<Vec<(PathBuf, u32)>, ShmError> {

@@ -151,6 +151,22 @@ fn check_batch(sample: &ObsSample<ipc::Service>, seq: u64) {
 }
 
 #[test]
+fn shm_file_names_of_one_run_only() {
+    let hash = "9204dd183d1c4d8e1ff592a30766ffa6765aa8b5";
+    assert!(is_iceoryx2_name_after_prefix(
+        format!("{hash}_node.0_10_0.global_mgmt").as_bytes()
+    ));
+    assert!(is_iceoryx2_name_after_prefix(
+        format!("{hash}_1584566279.data").as_bytes()
+    ));
+    // What follows `wg_a_` in a file of run `a_b`.
+    assert!(!is_iceoryx2_name_after_prefix(
+        format!("b_{hash}_node.0_10_0.global_mgmt").as_bytes()
+    ));
+    assert!(!is_iceoryx2_name_after_prefix(b"short"));
+}
+
+#[test]
 fn obs_roundtrip_to_two_subscribers() {
     let _w = Watchdog::arm("obs_roundtrip_to_two_subscribers");
     let t = TestPrefix::new("obs");
