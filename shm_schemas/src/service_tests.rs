@@ -273,6 +273,15 @@ fn route_roundtrip() {
         RouteStatus::TooLong
     );
     let reply = pending.wait(WATCHDOG).unwrap();
+    let data: u64 = shm_files(&t.prefix)
+        .unwrap()
+        .iter()
+        .filter(|(p, _)| p.to_string_lossy().ends_with(".data"))
+        .map(|(p, _)| std::fs::metadata(p).unwrap().len())
+        .max()
+        .unwrap();
+    eprintln!("route: largest data segment (server responses) {data} B");
+    assert!(data < 8 << 20, "{data}");
     assert_eq!(
         (reply.status(), reply.actions().len()),
         (Some(RouteStatus::TooLong), 0)
