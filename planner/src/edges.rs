@@ -585,11 +585,17 @@ mod tests {
         let l = sim::Maze::Small.layout(true);
         let nodes = crate::pivotal::v_rand(&l, 12, 5).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
-        let c = PlannerConfig { shorten: false, ..cfg(128) };
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| discover_edges(&w, &c));
-        let many = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool").install(|| discover_edges(&w, &c));
-        assert_eq!(one, many);
-        assert!(!one.is_empty());
+        for shorten in [false, true] {
+            let c = PlannerConfig { shorten, ..cfg(128) };
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| discover_edges(&w, &c));
+            let many = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool").install(|| discover_edges(&w, &c));
+            assert_eq!(one, many);
+            assert!(!one.is_empty());
+            if !shorten {
+                // Raw walk paths depend on the seed (shortened ones are exact).
+                assert_ne!(one, discover_edges(&w, &PlannerConfig { seed: 1, ..c.clone() }), "the seed matters");
+            }
+        }
     }
 
     #[test]

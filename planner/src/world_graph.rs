@@ -1090,6 +1090,30 @@ mod tests {
         }
     }
 
+    /// Pictures to look at: the medium maze's graph and a coverage heat map
+    /// of random walks, written to the temp directory; run with
+    /// `cargo test --release -p planner -- --ignored --nocapture pictures`.
+    #[test]
+    #[ignore = "writes pictures for a human to look at"]
+    fn pictures() {
+        let dir = std::env::temp_dir().join("planner-pictures");
+        for (maze, dk) in [(Maze::Medium, false), (Maze::Small, true)] {
+            let layout = maze.layout(dk);
+            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 24 }, 1), &[]).expect("graph");
+            g.save_png(&dir.join(format!("{}-graph.png", layout.name)), 24).expect("png");
+            let mut env = fresh_env(&g);
+            let mut cov = crate::Coverage::for_layout(&layout);
+            let mut rng = SmallRng::seed_from_u64(0);
+            let mut batch = Vec::new();
+            for _ in 0..20_000 {
+                batch.push(env.step_meta(rng.random_range(0..3)));
+            }
+            cov.observe(&batch);
+            cov.save_png(&layout, &dir.join(format!("{}-coverage.png", layout.name)), 24).expect("png");
+        }
+        println!("pictures in {}", dir.display());
+    }
+
     /// Timing figures for the closing note; run with
     /// `cargo test --release -p planner -- --ignored --nocapture timing`.
     #[test]
