@@ -65,9 +65,9 @@
 //! read-writable; [`create_node`] tightens that one to `0600`. The
 //! `dev_permissions` feature stays off.
 
-use std::cell::Cell;
 use std::fmt::Debug;
 use std::path::{Path as StdPath, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::active_request::ActiveRequest;
@@ -772,7 +772,7 @@ pub struct PipelineNode<S: Service> {
     run: RunName,
     retry_timeout: Duration,
     /// Set once this node opened any of the run's services.
-    opened: Cell<bool>,
+    opened: AtomicBool,
 }
 
 impl<S: Service> PipelineNode<S> {
@@ -786,7 +786,7 @@ impl<S: Service> PipelineNode<S> {
             node: create_node(config, node_name)?,
             run,
             retry_timeout: DEFAULT_RETRY_TIMEOUT,
-            opened: Cell::new(false),
+            opened: AtomicBool::new(false),
         })
     }
 
@@ -819,7 +819,7 @@ impl<S: Service> PipelineNode<S> {
     /// call it at start-up, before this node opens any port. Returns the
     /// number of services removed.
     pub fn force_remove_stale_services(&self) -> Result<usize, ShmError> {
-        if self.opened.get() {
+        if self.opened.load(Ordering::Relaxed) {
             return Err(ShmError::Ipc {
                 op: "force remove services",
                 service: self.run.to_string(),
@@ -887,7 +887,7 @@ impl<S: Service> PipelineNode<S> {
     }
 
     fn mark_opened(&self) {
-        self.opened.set(true);
+        self.opened.store(true, Ordering::Relaxed);
     }
 
     fn open_failed<E: Debug>(
@@ -1150,7 +1150,7 @@ impl<S: Service> PipelineNode<S> {
             client,
             _service: service,
             run_id: self.run.id(),
-            next_id: Cell::new(1),
+            next_id: AtomicU64::new(1),
         })
     }
 
@@ -1617,7 +1617,7 @@ pub struct RouteClient<S: Service> {
     client: Client<S, RouteRequest, (), RouteResponse, ()>,
     _service: RouteService<S>,
     run_id: u64,
-    next_id: Cell<u64>,
+    next_id: AtomicU64,
 }
 
 impl<S: Service> RouteClient<S> {
@@ -1630,8 +1630,7 @@ impl<S: Service> RouteClient<S> {
         from_dir: u8,
         to_pivot: u16,
     ) -> Result<PendingRoute<S>, ShmError> {
-        let id = self.next_id.get();
-        self.next_id.set(id + 1);
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         let request = RouteRequest::new(id, self.run_id, env, from_cell, from_dir, to_pivot);
         let pending = self
             .client

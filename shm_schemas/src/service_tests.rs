@@ -782,3 +782,27 @@ fn obs_memory_scales_with_the_shape() {
     }
     assert!(sizes[0] * 10 < sizes[1]);
 }
+
+#[test]
+fn threadsafe_service_ports_move_between_threads() {
+    let _w = Watchdog::arm("threadsafe_service_ports_move_between_threads");
+    let t = TestPrefix::new("threads");
+    let shape = ObsShape::new(4, 5, 5).unwrap();
+    let sim = PipelineNode::<ipc_threadsafe::Service>::new(&t.config, run(), "sim").unwrap();
+    let learner =
+        PipelineNode::<ipc_threadsafe::Service>::new(&t.config, run(), "learner").unwrap();
+    let subscriber = learner.obs_subscriber(shape).unwrap();
+    let publisher = sim.obs_publisher(shape).unwrap();
+    let reader = std::thread::spawn(move || {
+        let sample = poll("obs batch on another thread", || {
+            subscriber.receive().unwrap()
+        });
+        sample.batch().cells.iter().map(|&c| c as u32).sum::<u32>()
+    });
+    let mut sample = publisher.loan(0, 0).unwrap();
+    let batch = sample.batch_mut();
+    batch.meta.fill(EnvMeta::EMPTY);
+    batch.cells.fill(2);
+    sample.send().unwrap();
+    assert_eq!(reader.join().unwrap(), 2 * 4 * 25);
+}
