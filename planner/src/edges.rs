@@ -43,7 +43,7 @@
 //! Walks from node `i` draw from their own RNG seeded by `(seed, i)` and run
 //! in a fixed order, so the edges do not depend on the number of threads.
 
-use std::collections::HashMap;
+use std::collections::HashSet;
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -388,12 +388,12 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
     let mut worlds: Vec<(u64, Env)> = vec![(world.initial_hash(), world.template.clone())];
     // BFS states: (pose id, world index, parent state, action from parent).
     let mut states: Vec<(u32, u32, u32, u8)> = Vec::new();
-    let mut seen: HashMap<(u32, u32), ()> = HashMap::new();
+    let mut seen: HashSet<(u32, u32)> = HashSet::new();
     let mut reached = vec![false; world.nodes.len()];
     reached[from.index()] = true;
     for dir in 0..4u8 {
         let pid = from_cell.0 * 4 + dir as u32;
-        seen.insert((pid, 0), ());
+        seen.insert((pid, 0));
         states.push((pid, 0, u32::MAX, 0));
     }
     let mut head = 0;
@@ -453,7 +453,7 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
                     (worlds.len() - 1) as u32
                 }
             };
-            if seen.insert((next, nw), ()).is_none() {
+            if seen.insert((next, nw)) {
                 states.push((next, nw, head as u32, a));
             }
         }

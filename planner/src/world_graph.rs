@@ -241,6 +241,29 @@ impl WorldGraph {
         g
     }
 
+    /// Refines edge paths (paper section 3.3: "each path is further refined
+    /// by `π_g` if feasible"): `propose` sees each edge and may return
+    /// another path for it, e.g. one followed by the goal-conditioned
+    /// policy. A proposal replaces the edge when it joins the same nodes,
+    /// is strictly shorter and replays in the simulator
+    /// ([`check_edge_path`]); the route tables are then rebuilt. Returns how
+    /// many edges changed.
+    pub fn refine_edges(&mut self, mut propose: impl FnMut(&EdgePath) -> Option<EdgePath>) -> usize {
+        let mut changed = 0;
+        for k in 0..self.edges.len() {
+            let Some(p) = propose(&self.edges[k]) else { continue };
+            let e = &self.edges[k];
+            if (p.from, p.to) == (e.from, e.to) && p.weight() < e.weight() && check_edge_path(&self.world, &p).is_ok() {
+                self.edges[k] = p;
+                changed += 1;
+            }
+        }
+        if changed > 0 {
+            self.rebuild_shortest_paths();
+        }
+        changed
+    }
+
     /// Recomputes the route tables from the edges: Floyd–Warshall over the
     /// edge weights, the edge lookup and the flat path storage. Called by
     /// the constructors; public so that its cost can be measured.
@@ -1002,6 +1025,28 @@ mod tests {
         env.teleport(route.start().expect("start"));
         replay(&g, &mut env, &route, NodeId(1)).expect("executable");
         assert!(route.world_after().carrying_key && route.world_after().open_doors == 1);
+    }
+
+    #[test]
+    fn refinement_accepts_only_shorter_valid_paths() {
+        let layout = Maze::Small.layout(false);
+        let raw = PlannerConfig { shorten: false, ..cfg(CandidateSet::Random { k: 10 }, 3) };
+        let mut g = WorldGraph::build(&layout, &raw, &[]).expect("graph");
+        let exact = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 10 }, 3), &[]).expect("graph");
+        // Longer or broken proposals are refused.
+        assert_eq!(g.refine_edges(|e| Some(EdgePath { actions: [e.actions.clone(), vec![action::LEFT]].concat(), cells: [e.cells.clone(), vec![*e.cells.last().expect("path")]].concat(), ..e.clone() })), 0);
+        let nodes = g.nodes().to_vec();
+        assert_eq!(g.refine_edges(|e| Some(EdgePath { actions: vec![action::LEFT], cells: vec![nodes[e.to.index()]], ..e.clone() })), 0);
+        // The exact paths (a stand-in for π_g) are taken where shorter.
+        let before: u32 = g.edges().iter().map(EdgePath::weight).sum();
+        let changed = g.refine_edges(|e| exact.edge(e.from, e.to).cloned());
+        let after: u32 = g.edges().iter().map(EdgePath::weight).sum();
+        assert!(changed > 0 && after < before, "{changed} edges, {before} -> {after}");
+        for a in 0..g.num_nodes() as u16 {
+            for b in 0..g.num_nodes() as u16 {
+                assert_eq!(g.distance(NodeId(a), NodeId(b)), dijkstra(&g, NodeId(a))[b as usize]);
+            }
+        }
     }
 
     #[test]
