@@ -13,6 +13,9 @@ use crate::error::PlannerError;
 pub const MAX_NODES: usize = shm_schemas::MAX_PIVOTS;
 const _: () = assert!(MAX_NODES < shm_schemas::NO_PIVOT as usize);
 
+/// Most walk steps from one node (`walks_per_node × walk_len`).
+pub const MAX_STEPS_PER_NODE: u64 = 1 << 31;
+
 /// Where the graph's nodes come from (paper section 4, "Wide-then-Narrow":
 /// `V_all`, `V_rand` or `V_p`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -108,6 +111,10 @@ impl PlannerConfig {
         if self.walk_len == 0 {
             return bad("walk_len", "must be at least 1".into());
         }
+        // One simulator runs a node's walks; its step counter is a u32.
+        if u64::from(self.walks_per_node) * u64::from(self.walk_len) > MAX_STEPS_PER_NODE {
+            return bad("walks_per_node", format!("{} walks of {} actions exceed {MAX_STEPS_PER_NODE} steps per node", self.walks_per_node, self.walk_len));
+        }
         match &self.candidates {
             CandidateSet::Random { k } if *k == 0 || *k > MAX_NODES => {
                 bad("candidates.random.k", format!("{k} is not in 1..={MAX_NODES}"))
@@ -138,6 +145,8 @@ mod tests {
         assert!(e.contains("walk_len"), "{e}");
         let c = PlannerConfig { candidates: CandidateSet::Random { k: 0 }, ..PlannerConfig::default() };
         assert!(c.validate().expect_err("k 0").to_string().contains("candidates.random.k"));
+        let c = PlannerConfig { walks_per_node: 1 << 20, walk_len: 1 << 12, ..PlannerConfig::default() };
+        assert!(c.validate().expect_err("too many steps").to_string().contains("walks_per_node"));
     }
 
     #[test]

@@ -319,6 +319,10 @@ pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
                     return best;
                 }
                 let mut rng = SmallRng::seed_from_u64(sim::env_seed(cfg.seed, i as u64));
+                // A fresh simulator per node bounds its step counter
+                // (`PlannerConfig::validate` caps walks × length).
+                s.env = world.template.clone();
+                s.dirty = false;
                 for w in 0..cfg.walks_per_node {
                     let dir = (w % 4) as u8;
                     let Some(q) = walk(world, p, dir, cfg.walk_len, &mut rng, s, h0) else { continue };
