@@ -8,9 +8,13 @@ use sim::Task;
 
 use crate::error::PlannerError;
 
-/// Most nodes a graph may have: ids are `u16` and the wire format reserves
-/// `u16::MAX` for "no pivot"; the largest grid (64 × 64) has fewer cells.
-pub const MAX_NODES: usize = 4096;
+/// Most nodes a graph may have: the wire format's limit (one per cell of
+/// the largest grid); ids are `u16`, with `u16::MAX` reserved for "no pivot".
+pub const MAX_NODES: usize = shm_schemas::MAX_PIVOTS;
+const _: () = assert!(MAX_NODES < shm_schemas::NO_PIVOT as usize);
+
+/// Most walk steps from one node (`walks_per_node × walk_len`).
+pub const MAX_STEPS_PER_NODE: u64 = 1 << 31;
 
 /// Where the graph's nodes come from (paper section 4, "Wide-then-Narrow":
 /// `V_all`, `V_rand` or `V_p`).
@@ -35,6 +39,25 @@ pub enum CandidateSet {
     Given,
 }
 
+/// How edges are found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EdgeSearch {
+    /// The paper's method: random walks from every node
+    /// ([`crate::edges::discover_edges`]).
+    #[default]
+    RandomWalks,
+    /// Every edge random walks could ever find, by a search over states
+    /// ([`crate::edges::exhaustive_edges_from`]): the limit of unboundedly
+    /// many walks. Denser than the walks' graph (in an open room every pair
+    /// of nodes is joined by some path around the others, though walks
+    /// nearly always meet the nearest node first); for sparse node sets in
+    /// large mazes where walks of a practical length miss long edges, and
+    /// for the paper's "all pre-requisites granted" comparison of `V_rand`
+    /// (section 4, footnote on `V_rand`).
+    Exhaustive,
+}
+
 /// Settings of world-graph construction. `#[serde(default)]`: a partial
 /// JSON object fills the rest from [`PlannerConfig::default`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -51,6 +74,8 @@ pub struct PlannerConfig {
     /// Most actions per random walk; a walk also stops at the first node
     /// it reaches or when its episode ends (exit, lava).
     pub walk_len: u32,
+    /// Random walks (the paper) or the exhaustive search.
+    pub edge_search: EdgeSearch,
     /// Shorten every discovered edge with an exact breadth-first search
     /// that does not touch a third node ([`crate::edges::shorten_edge`]),
     /// standing in for the paper's refinement by `π_g`.
@@ -68,7 +93,8 @@ impl Default for PlannerConfig {
             candidates: CandidateSet::Random { k: 32 },
             seed: 0,
             walks_per_node: 512,
-            walk_len: 128,
+            walk_len: 512,
+            edge_search: EdgeSearch::RandomWalks,
             shorten: true,
             task: Task::MultiGoal,
         }
@@ -84,6 +110,10 @@ impl PlannerConfig {
         }
         if self.walk_len == 0 {
             return bad("walk_len", "must be at least 1".into());
+        }
+        // One simulator runs a node's walks; its step counter is a u32.
+        if u64::from(self.walks_per_node) * u64::from(self.walk_len) > MAX_STEPS_PER_NODE {
+            return bad("walks_per_node", format!("{} walks of {} actions exceed {MAX_STEPS_PER_NODE} steps per node", self.walks_per_node, self.walk_len));
         }
         match &self.candidates {
             CandidateSet::Random { k } if *k == 0 || *k > MAX_NODES => {
@@ -115,6 +145,8 @@ mod tests {
         assert!(e.contains("walk_len"), "{e}");
         let c = PlannerConfig { candidates: CandidateSet::Random { k: 0 }, ..PlannerConfig::default() };
         assert!(c.validate().expect_err("k 0").to_string().contains("candidates.random.k"));
+        let c = PlannerConfig { walks_per_node: 1 << 20, walk_len: 1 << 12, ..PlannerConfig::default() };
+        assert!(c.validate().expect_err("too many steps").to_string().contains("walks_per_node"));
     }
 
     #[test]

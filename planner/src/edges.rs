@@ -43,7 +43,7 @@
 //! Walks from node `i` draw from their own RNG seeded by `(seed, i)` and run
 //! in a fixed order, so the edges do not depend on the number of threads.
 
-use std::collections::HashMap;
+use std::collections::HashSet;
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -51,7 +51,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sim::{AutoReset, BallSpawn, Env, EnvConfig, EnvMeta, Layout, Object, Task, action, flags};
 
-use crate::config::PlannerConfig;
+use crate::config::{EdgeSearch, PlannerConfig};
 use crate::ids::{CellIdx, NodeId};
 
 /// One directed edge `from → to` with the path kept for it.
@@ -299,8 +299,14 @@ fn walk(world: &EdgeWorld, p: NodeId, dir: u8, len: u32, rng: &mut SmallRng, s: 
 /// (module docs), one per ordered pair at most, sorted by `(from, to)`,
 /// each the shortest path any walk found (ties: the earliest walk); then,
 /// when `cfg.shorten` is set, each shortened by [`shorten_edge`]. Nodes on
-/// the exit get no outgoing edges: the episode ends there.
+/// the exit get no outgoing edges: the episode ends there. With
+/// [`EdgeSearch::Exhaustive`], the edges of [`exhaustive_edges_from`]
+/// instead (every edge the walks could ever find, at its shortest).
 pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
+    if cfg.edge_search == EdgeSearch::Exhaustive {
+        let per_node: Vec<Vec<EdgePath>> = (0..world.nodes.len()).into_par_iter().map(|i| exhaustive_edges_from(world, NodeId(i as u16))).collect();
+        return per_node.into_iter().flatten().collect();
+    }
     let h0 = world.initial_hash();
     let per_node: Vec<Vec<EdgePath>> = (0..world.nodes.len())
         .into_par_iter()
@@ -313,6 +319,10 @@ pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
                     return best;
                 }
                 let mut rng = SmallRng::seed_from_u64(sim::env_seed(cfg.seed, i as u64));
+                // A fresh simulator per node bounds its step counter
+                // (`PlannerConfig::validate` caps walks × length).
+                s.env = world.template.clone();
+                s.dirty = false;
                 for w in 0..cfg.walks_per_node {
                     let dir = (w % 4) as u8;
                     let Some(q) = walk(world, p, dir, cfg.walk_len, &mut rng, s, h0) else { continue };
@@ -349,46 +359,80 @@ pub fn shorten_edge(world: &EdgeWorld, edge: &EdgePath) -> EdgePath {
 /// from node `from` (any facing, initial world) to node `to` that touches no
 /// third node; `None` when there is none.
 pub fn shortest_edge_path(world: &EdgeWorld, from: NodeId, to: NodeId) -> Option<EdgePath> {
-    let width = world.layout().width;
-    let (from_cell, to_cell) = (*world.nodes.get(from.index())?, *world.nodes.get(to.index())?);
-    if from == to || world.layout().cells[from_cell.index()] == Object::Exit as u8 {
+    if to.index() >= world.nodes.len() {
         return None;
+    }
+    bfs_edges(world, from, Some(to)).pop()
+}
+
+/// Every edge out of `from` with its shortest path: the nodes a search over
+/// (pose, world) states reaches without touching a third node, sorted by
+/// target. The limit of [`discover_edges`] with unboundedly many walks.
+pub fn exhaustive_edges_from(world: &EdgeWorld, from: NodeId) -> Vec<EdgePath> {
+    let mut edges = bfs_edges(world, from, None);
+    edges.sort_unstable_by_key(|e| e.to);
+    edges
+}
+
+/// The breadth-first search of [`shortest_edge_path`] and
+/// [`exhaustive_edges_from`]: from the four facings on `from` in the initial
+/// world, with the walk policy's actions, never expanding a state on
+/// another node or at the end of an episode. Each node other than `from`
+/// is recorded at its first (shortest) arrival; with `target` set, only
+/// that node, and the search stops there. Ties go to the state enqueued
+/// first (lowest start facing, then action order).
+fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<EdgePath> {
+    let mut found = Vec::new();
+    let width = world.layout().width;
+    let Some(&from_cell) = world.nodes.get(from.index()) else { return found };
+    if world.layout().cells[from_cell.index()] == Object::Exit as u8 {
+        return found;
     }
     // Worlds met so far: their hash and an environment in that world.
     let mut worlds: Vec<(u64, Env)> = vec![(world.initial_hash(), world.template.clone())];
     // BFS states: (pose id, world index, parent state, action from parent).
     let mut states: Vec<(u32, u32, u32, u8)> = Vec::new();
-    let mut seen: HashMap<(u32, u32), ()> = HashMap::new();
+    let mut seen: HashSet<(u32, u32)> = HashSet::new();
+    let mut reached = vec![false; world.nodes.len()];
+    reached[from.index()] = true;
     for dir in 0..4u8 {
         let pid = from_cell.0 * 4 + dir as u32;
-        seen.insert((pid, 0), ());
+        seen.insert((pid, 0));
         states.push((pid, 0, u32::MAX, 0));
     }
     let mut head = 0;
     let mut choices = [0u8; 5];
     while head < states.len() {
         let (pid, wi, _, _) = states[head];
-        if pid / 4 == to_cell.0 {
-            let (mut actions, mut cells) = (Vec::new(), Vec::new());
-            let mut i = head;
-            while states[i].2 != u32::MAX {
-                actions.push(states[i].3);
-                cells.push(CellIdx(states[i].0 / 4));
-                i = states[i].2 as usize;
+        if let Some(q) = world.node_at(CellIdx(pid / 4)).filter(|&q| q != from) {
+            // On another node: an edge (at its shortest), never expanded.
+            if !std::mem::replace(&mut reached[q.index()], true) && target.is_none_or(|t| t == q) {
+                let (mut actions, mut cells) = (Vec::new(), Vec::new());
+                let mut i = head;
+                while states[i].2 != u32::MAX {
+                    actions.push(states[i].3);
+                    cells.push(CellIdx(states[i].0 / 4));
+                    i = states[i].2 as usize;
+                }
+                actions.reverse();
+                cells.reverse();
+                found.push(EdgePath { from, to: q, start_dir: (states[i].0 % 4) as u8, actions, cells });
+                if target.is_some() {
+                    return found;
+                }
             }
-            actions.reverse();
-            cells.reverse();
-            return Some(EdgePath { from, to, start_dir: (states[i].0 % 4) as u8, actions, cells });
+            head += 1;
+            continue;
         }
         let pose = CellIdx(pid / 4).pose(width, (pid % 4) as u8);
         let hash = worlds[wi as usize].0;
         let env = &mut worlds[wi as usize].1;
         env.teleport(pose);
         let n = world.effective_actions(env, &mut choices);
+        let front = CellIdx(pid / 4).step(pose.dir, world.layout()).index();
         for &a in &choices[..n] {
             // Actions that may change the world step a copy; the others
             // reuse the world's environment (teleported back each time).
-            let front = CellIdx(pid / 4).step(pose.dir, world.layout()).index();
             let changes = a == action::PICKUP || a == action::TOGGLE || (a == action::FORWARD && worlds[wi as usize].1.grid()[front] == Object::Ball as u8);
             let (meta, h, env_after) = if changes {
                 let mut e = worlds[wi as usize].1.clone();
@@ -402,8 +446,7 @@ pub fn shortest_edge_path(world: &EdgeWorld, from: NodeId, to: NodeId) -> Option
                 (m, h, None)
             };
             let next = world.pose_id(&meta);
-            let cell = CellIdx(next / 4);
-            if cell != to_cell && (meta.flags & flags::TERMINATED != 0 || world.node_at(cell).is_some_and(|q| q != from)) {
+            if meta.flags & flags::TERMINATED != 0 && world.node_at(CellIdx(next / 4)).is_none() {
                 continue;
             }
             let nw = match worlds.iter().position(|(wh, _)| *wh == h) {
@@ -414,13 +457,13 @@ pub fn shortest_edge_path(world: &EdgeWorld, from: NodeId, to: NodeId) -> Option
                     (worlds.len() - 1) as u32
                 }
             };
-            if seen.insert((next, nw), ()).is_none() {
+            if seen.insert((next, nw)) {
                 states.push((next, nw, head as u32, a));
             }
         }
         head += 1;
     }
-    None
+    found
 }
 
 /// Replays `edge`'s path in the simulator from `from`'s cell facing
@@ -482,6 +525,9 @@ mod tests {
         let pairs: Vec<(u16, u16, u32)> = edges.iter().map(|e| (e.from.0, e.to.0, e.weight())).collect();
         // 0↔1 and 1↔2 (3 cells apart: 3 forwards after facing the right way); never 0→2.
         assert_eq!(pairs, vec![(0, 1, 3), (1, 0, 3), (1, 2, 3), (2, 1, 3)]);
+        let all = discover_edges(&w, &PlannerConfig { edge_search: EdgeSearch::Exhaustive, ..cfg(1) });
+        let all: Vec<(u16, u16, u32)> = all.iter().map(|e| (e.from.0, e.to.0, e.weight())).collect();
+        assert_eq!(all, pairs);
         assert!(edges.iter().all(|e| e.cells.last() == Some(&nodes[e.to.index()])));
     }
 
@@ -518,15 +564,42 @@ mod tests {
     }
 
     #[test]
+    fn walk_edges_are_exhaustive_edges_with_the_same_weights() {
+        for (maze, dk) in [(sim::Maze::Small, true), (sim::Maze::Medium, false)] {
+            let l = maze.layout(dk);
+            let nodes = crate::pivotal::v_rand(&l, 20, 8).expect("nodes");
+            let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
+            let walks = discover_edges(&w, &cfg(256));
+            let all = discover_edges(&w, &PlannerConfig { edge_search: EdgeSearch::Exhaustive, ..cfg(1) });
+            // Walks mostly meet the nearest nodes first; the search finds every
+            // pair joined by some path around the other nodes.
+            assert!(!walks.is_empty() && walks.len() <= all.len(), "{} of {}", walks.len(), all.len());
+            for e in &walks {
+                let x = all.iter().find(|x| (x.from, x.to) == (e.from, e.to)).expect("a walk edge is a possible edge");
+                assert_eq!(x.weight(), e.weight(), "{} -> {}", e.from, e.to);
+            }
+            for e in &all {
+                check_edge_path(&w, e).expect("exhaustive paths replay");
+            }
+        }
+    }
+
+    #[test]
     fn same_seed_same_edges_on_any_thread_count() {
         let l = sim::Maze::Small.layout(true);
         let nodes = crate::pivotal::v_rand(&l, 12, 5).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
-        let c = PlannerConfig { shorten: false, ..cfg(128) };
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| discover_edges(&w, &c));
-        let many = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool").install(|| discover_edges(&w, &c));
-        assert_eq!(one, many);
-        assert!(!one.is_empty());
+        for shorten in [false, true] {
+            let c = PlannerConfig { shorten, ..cfg(128) };
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| discover_edges(&w, &c));
+            let many = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool").install(|| discover_edges(&w, &c));
+            assert_eq!(one, many);
+            assert!(!one.is_empty());
+            if !shorten {
+                // Raw walk paths depend on the seed (shortened ones are exact).
+                assert_ne!(one, discover_edges(&w, &PlannerConfig { seed: 1, ..c.clone() }), "the seed matters");
+            }
+        }
     }
 
     #[test]

@@ -143,3 +143,20 @@ pub enum PlannerError {
     #[error(transparent)]
     Sim(#[from] sim::SimError),
 }
+
+impl PlannerError {
+    /// The route-response status a route service answers for this error:
+    /// [`PlannerError::Unreachable`] → `Unreachable`,
+    /// [`PlannerError::UnknownNode`] → `UnknownTarget`,
+    /// [`PlannerError::NotOnGraph`] → `StartNotOnGraph`, anything else →
+    /// `BadRequest`.
+    pub fn route_status(&self) -> shm_schemas::RouteStatus {
+        use shm_schemas::RouteStatus;
+        match self {
+            PlannerError::Unreachable { .. } => RouteStatus::Unreachable,
+            PlannerError::UnknownNode { .. } => RouteStatus::UnknownTarget,
+            PlannerError::NotOnGraph { .. } => RouteStatus::StartNotOnGraph,
+            _ => RouteStatus::BadRequest,
+        }
+    }
+}

@@ -21,6 +21,22 @@
 //! here is pure: the iceoryx2 route service only turns requests into calls
 //! of [`WorldGraph::route_from_pose_into`] and friends.
 //!
+//! ## Calling it
+//! - Build: [`WorldGraph::build`]`(&layout, &cfg, given)`; nodes come from
+//!   [`PlannerConfig::candidates`] (`V_rand`, `V_all`, a file, or `given`,
+//!   e.g. the learner's pivotal states through
+//!   [`pivotal::nodes_from_cells`]).
+//! - Query: keep one [`Route`] per caller ([`Route::with_capacity`]) and call
+//!   [`WorldGraph::route_into`] (node to node) or
+//!   [`WorldGraph::route_from_pose_into`] (any pose to a node, with the
+//!   observed [`RouteWorld`] from [`WorldGraph::observe_world`]); copy the
+//!   answer into a wire response with [`Route::write_wire`] and map errors
+//!   with [`PlannerError::route_status`].
+//! - Persist: [`WorldGraph::save`] / [`WorldGraph::load`] (JSON, atomic),
+//!   [`WorldGraph::save_png`], [`Coverage::save_png`].
+//! - Measure: [`WorldGraph::rebuild_shortest_paths`] and the route queries
+//!   are what `bench planner` times.
+//!
 //! ```
 //! use planner::{CandidateSet, PlannerConfig, Route, WorldGraph};
 //! let layout = sim::Maze::Small.layout(false);
@@ -46,7 +62,7 @@ pub mod pivotal;
 pub mod shortest_path;
 pub mod world_graph;
 
-pub use config::{CandidateSet, MAX_NODES, PlannerConfig};
+pub use config::{CandidateSet, EdgeSearch, MAX_NODES, PlannerConfig};
 pub use coverage::Coverage;
 pub use edges::{EdgePath, EdgeWorld};
 pub use error::PlannerError;

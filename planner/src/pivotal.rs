@@ -51,7 +51,7 @@ pub fn v_rand(layout: &Layout, k: usize, seed: u64) -> Result<Vec<CellIdx>, Plan
     if k > all.len() {
         return Err(PlannerError::NotEnoughCells { requested: k, available: all.len() });
     }
-    let mut rng = SmallRng::seed_from_u64(sim::env_seed(seed, 0x5652_414e_44)); // "VRAND"
+    let mut rng = SmallRng::seed_from_u64(sim::env_seed(seed, 0x0056_5241_4e44)); // "VRAND"
     let (chosen, _) = all.partial_shuffle(&mut rng, k);
     let mut chosen = chosen.to_vec();
     chosen.sort_unstable();
@@ -69,10 +69,28 @@ pub fn select_pivotal(layout: &Layout, scored: &[(CellIdx, f32)], fraction: f32)
         scored.iter().copied().filter(|(c, v)| standable.get(c.index()).copied().unwrap_or(false) && v.is_finite()).collect();
     s.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
     s.dedup_by_key(|(c, _)| *c);
-    let keep = ((s.len() as f32 * fraction.clamp(0.0, 1.0)).round() as usize).max(usize::from(!s.is_empty()));
+    // Rounded up, at least one: the learner's `pivotal_states` counts the same way.
+    let keep = ((s.len() as f64 * f64::from(fraction.clamp(0.0, 1.0))).ceil() as usize).max(usize::from(!s.is_empty()));
     let mut cells: Vec<CellIdx> = s.into_iter().take(keep.min(MAX_NODES)).map(|(c, _)| c).collect();
     cells.sort_unstable();
     cells
+}
+
+/// Node cells from raw cell indices (e.g. the learner's pivotal states,
+/// `y · width + x`): cells the agent cannot stand on at the start of an
+/// episode (keys, closed doors, walls, out of the grid) are dropped, as are
+/// repeats; the order is kept. The result passes [`check_nodes`] (up to
+/// [`MAX_NODES`] cells).
+pub fn nodes_from_cells(layout: &Layout, cells: &[u32]) -> Vec<CellIdx> {
+    let mut standable = standable_mask(layout);
+    let mut out = Vec::with_capacity(cells.len().min(MAX_NODES));
+    for &c in cells {
+        if out.len() < MAX_NODES && standable.get(c as usize).copied().unwrap_or(false) {
+            standable[c as usize] = false;
+            out.push(CellIdx(c));
+        }
+    }
+    out
 }
 
 fn standable_mask(layout: &Layout) -> Vec<bool> {
@@ -131,7 +149,7 @@ pub fn check_nodes(layout: &Layout, cells: &[CellIdx]) -> Result<Vec<CellIdx>, P
 pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<CellIdx>, PlannerError> {
     let err = |line: usize, message: String| PlannerError::NodeList { source_name: source.to_string(), line, message };
     let trimmed = text.trim_start();
-    let pairs: Vec<(i64, i64, usize)> = if trimmed.starts_with('[') || trimmed.starts_with('{') {
+    let pairs: Vec<ListedCell> = if trimmed.starts_with('[') || trimmed.starts_with('{') {
         parse_json_pairs(text).map_err(|(line, m)| err(line, m))?
     } else {
         let mut pairs = Vec::new();
@@ -175,8 +193,12 @@ pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<
     })
 }
 
-/// `(x, y, line)` triples of a JSON node list; errors as `(line, message)`.
-fn parse_json_pairs(text: &str) -> Result<Vec<(i64, i64, usize)>, (usize, String)> {
+/// `(x, y, line)` of one listed cell.
+type ListedCell = (i64, i64, usize);
+
+/// The cells of a JSON node list (line 0: JSON values carry no line);
+/// errors as `(line, message)`.
+fn parse_json_pairs(text: &str) -> Result<Vec<ListedCell>, (usize, String)> {
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| (e.line(), format!("invalid JSON: {e}")))?;
     let list = match &value {
         serde_json::Value::Array(a) => a,
@@ -281,9 +303,18 @@ mod tests {
         let all = v_all(&l);
         let scored: Vec<(CellIdx, f32)> = all.iter().enumerate().map(|(i, &c)| (c, i as f32)).collect();
         let p = select_pivotal(&l, &scored, 0.2);
-        assert_eq!(p.len(), (all.len() as f32 * 0.2).round() as usize);
+        assert_eq!(p.len(), (all.len() as f64 * 0.2).ceil() as usize);
         assert!(p.iter().all(|c| all[all.len() - p.len()..].contains(c)));
         check_nodes(&l, &p).expect("pivotal states are valid nodes");
         assert_eq!(select_pivotal(&l, &scored[..1], 0.2).len(), 1);
+    }
+
+    #[test]
+    fn raw_cells_become_valid_nodes() {
+        let l = small();
+        let key = l.cells.iter().position(|&c| c == Object::Key as u8).expect("key") as u32;
+        let a = CellIdx::from_xy(1, 1, l.width).0;
+        let b = CellIdx::from_xy(2, 1, l.width).0;
+        assert_eq!(nodes_from_cells(&l, &[b, key, 0, a, b, 10_000]), vec![CellIdx(b), CellIdx(a)]);
     }
 }

@@ -25,9 +25,10 @@ use rayon::prelude::*;
 
 use crate::ids::NodeId;
 
-/// Distance of a pair with no path. The same constant as the wire format's
-/// `UNREACHABLE` (`shm_schemas` route messages): `u32::MAX`.
-pub const UNREACHABLE: u32 = u32::MAX;
+/// Distance of a pair with no path (`u32::MAX`): the wire format's constant
+/// itself ([`shm_schemas::UNREACHABLE`]), so planner tables and route
+/// responses cannot drift apart.
+pub use shm_schemas::UNREACHABLE;
 
 /// `next` entry of a pair with no path.
 const NO_HOP: u16 = u16::MAX;
@@ -187,8 +188,8 @@ mod tests {
             let sp = ShortestPaths::floyd_warshall(n, edges.iter().copied());
             for s in 0..n {
                 let want = bfs_distances(n, &edges, s);
-                for t in 0..n {
-                    prop_assert_eq!(sp.dist(NodeId(s as u16), NodeId(t as u16)), want[t], "{} -> {}", s, t);
+                for (t, &w) in want.iter().enumerate() {
+                    prop_assert_eq!(sp.dist(NodeId(s as u16), NodeId(t as u16)), w, "{} -> {}", s, t);
                 }
             }
         }

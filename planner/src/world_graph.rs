@@ -125,6 +125,24 @@ impl Route {
     pub fn world_after(&self) -> RouteWorld {
         self.world_after
     }
+
+    /// Copies the route into wire-format arrays (a route response's
+    /// `pivots`, `cells` and `actions`) and returns `(num_pivots,
+    /// num_actions)`, or `None`, writing nothing, when it does not fit.
+    pub fn write_wire(&self, pivots: &mut [u16], cells: &mut [u32], actions: &mut [u8]) -> Option<(usize, usize)> {
+        let (np, na) = (self.nodes.len(), self.actions.len());
+        if np > pivots.len() || na > cells.len() || na > actions.len() {
+            return None;
+        }
+        for (w, n) in pivots.iter_mut().zip(&self.nodes) {
+            *w = n.0;
+        }
+        for (w, c) in cells.iter_mut().zip(&self.cells) {
+            *w = c.0;
+        }
+        actions[..na].copy_from_slice(&self.actions);
+        Some((np, na))
+    }
 }
 
 /// What the route replay needs to know about an edge.
@@ -221,6 +239,29 @@ impl WorldGraph {
         };
         g.rebuild_shortest_paths();
         g
+    }
+
+    /// Refines edge paths (paper section 3.3: "each path is further refined
+    /// by `π_g` if feasible"): `propose` sees each edge and may return
+    /// another path for it, e.g. one followed by the goal-conditioned
+    /// policy. A proposal replaces the edge when it joins the same nodes,
+    /// is strictly shorter and replays in the simulator
+    /// ([`check_edge_path`]); the route tables are then rebuilt. Returns how
+    /// many edges changed.
+    pub fn refine_edges(&mut self, mut propose: impl FnMut(&EdgePath) -> Option<EdgePath>) -> usize {
+        let mut changed = 0;
+        for k in 0..self.edges.len() {
+            let Some(p) = propose(&self.edges[k]) else { continue };
+            let e = &self.edges[k];
+            if (p.from, p.to) == (e.from, e.to) && p.weight() < e.weight() && check_edge_path(&self.world, &p).is_ok() {
+                self.edges[k] = p;
+                changed += 1;
+            }
+        }
+        if changed > 0 {
+            self.rebuild_shortest_paths();
+        }
+        changed
     }
 
     /// Recomputes the route tables from the edges: Floyd–Warshall over the
@@ -862,14 +903,17 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig { cases: 48, rng_seed: proptest::test_runner::RngSeed::Fixed(3), ..ProptestConfig::default() })]
 
-        /// On random layouts with doors and keys: DP distances equal
-        /// Dijkstra over the same edges, the triangle inequality holds, and
-        /// every route replays in a fresh simulator onto its target.
+        /// On random layouts with doors and keys, with edges from walks or
+        /// from the exhaustive search: DP distances equal Dijkstra over the
+        /// same edges, the triangle inequality holds, and every route
+        /// replays in a fresh simulator onto its target.
         #[test]
-        fn random_layouts_dp_matches_reference_and_routes_execute(seed in any::<u64>(), k in 2usize..10) {
+        fn random_layouts_dp_matches_reference_and_routes_execute(seed in any::<u64>(), k in 2usize..10, exhaustive in any::<bool>()) {
             let layout = random_layout(seed);
             let k = k.min(crate::pivotal::v_all(&layout).len());
-            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k }, seed), &[]).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            let edge_search = if exhaustive { crate::EdgeSearch::Exhaustive } else { crate::EdgeSearch::RandomWalks };
+            let c = PlannerConfig { edge_search, ..cfg(CandidateSet::Random { k }, seed) };
+            let g = WorldGraph::build(&layout, &c, &[]).map_err(|e| TestCaseError::fail(e.to_string()))?;
             check_graph(&g)?;
         }
 
@@ -984,6 +1028,28 @@ mod tests {
     }
 
     #[test]
+    fn refinement_accepts_only_shorter_valid_paths() {
+        let layout = Maze::Small.layout(false);
+        let raw = PlannerConfig { shorten: false, ..cfg(CandidateSet::Random { k: 10 }, 3) };
+        let mut g = WorldGraph::build(&layout, &raw, &[]).expect("graph");
+        let exact = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 10 }, 3), &[]).expect("graph");
+        // Longer or broken proposals are refused.
+        assert_eq!(g.refine_edges(|e| Some(EdgePath { actions: [e.actions.clone(), vec![action::LEFT]].concat(), cells: [e.cells.clone(), vec![*e.cells.last().expect("path")]].concat(), ..e.clone() })), 0);
+        let nodes = g.nodes().to_vec();
+        assert_eq!(g.refine_edges(|e| Some(EdgePath { actions: vec![action::LEFT], cells: vec![nodes[e.to.index()]], ..e.clone() })), 0);
+        // The exact paths (a stand-in for π_g) are taken where shorter.
+        let before: u32 = g.edges().iter().map(EdgePath::weight).sum();
+        let changed = g.refine_edges(|e| exact.edge(e.from, e.to).cloned());
+        let after: u32 = g.edges().iter().map(EdgePath::weight).sum();
+        assert!(changed > 0 && after < before, "{changed} edges, {before} -> {after}");
+        for a in 0..g.num_nodes() as u16 {
+            for b in 0..g.num_nodes() as u16 {
+                assert_eq!(g.distance(NodeId(a), NodeId(b)), dijkstra(&g, NodeId(a))[b as usize]);
+            }
+        }
+    }
+
+    #[test]
     fn json_round_trip_and_atomic_save() {
         let layout = Maze::Small.layout(true);
         let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 12 }, 9), &[]).expect("graph");
@@ -1035,8 +1101,62 @@ mod tests {
         assert!(r.is_empty() && r.start().is_none());
         assert_eq!(g.route_into(NodeId(1), 2, NodeId(1), &mut r).expect("trivial route"), 0);
         assert_eq!(r.nodes(), &[NodeId(1)]);
+        let e = g.route_into(NodeId(0), 0, NodeId(1), &mut r).expect_err("unreachable");
+        assert_eq!(e.route_status(), shm_schemas::RouteStatus::Unreachable);
+        let e = g.route_from_pose_into(Pose { x: 0, y: 0, dir: 0 }, NodeId(0), g.initial_world(), &mut r).expect_err("a wall");
+        assert_eq!(e.route_status(), shm_schemas::RouteStatus::StartNotOnGraph);
+        // Wire copy: fits or writes nothing.
+        g.route_from_pose_into(Pose { x: 1, y: 1, dir: 2 }, NodeId(0), g.initial_world(), &mut r).expect("route");
+        // Turn around (two turns either way), then one step onto node 0.
+        assert_eq!(r.len(), 3);
+        assert!(r.actions()[0] == r.actions()[1] && r.actions()[0] != action::FORWARD && r.actions()[2] == action::FORWARD);
+        let (mut p, mut c, mut a) = ([7u16; 4], [7u32; 4], [7u8; 4]);
+        assert_eq!(r.write_wire(&mut p, &mut c, &mut a), Some((1, 3)));
+        assert_eq!((p[0], &c[..3], &a[..3]), (0, &[8u32, 8, 9][..], r.actions()));
+        assert_eq!(r.write_wire(&mut p, &mut c[..2], &mut a), None);
         let two_keys = Layout::parse("k", "#######\n#>KK.E#\n#######\n").expect("valid");
         assert!(matches!(WorldGraph::build(&two_keys, &cfg(CandidateSet::All, 0), &[]), Err(PlannerError::UnsupportedLayout { .. })));
+    }
+
+    /// How much of each embedded maze the default walks connect; run with
+    /// `cargo test --release -p planner -- --ignored --nocapture connectivity`.
+    #[test]
+    #[ignore = "prints a report; not a correctness test"]
+    fn connectivity_report() {
+        for maze in Maze::ALL {
+            for k in [16, 32, 64] {
+                let layout = maze.layout(false);
+                let t = std::time::Instant::now();
+                let g = WorldGraph::build(&layout, &PlannerConfig { candidates: CandidateSet::Random { k }, ..PlannerConfig::default() }, &[]).expect("graph");
+                let n = g.num_nodes();
+                let pairs = (0..n * n).filter(|&i| g.distance(NodeId((i / n) as u16), NodeId((i % n) as u16)) != UNREACHABLE).count();
+                println!("{} k={k}: {} edges, {:.1}% of pairs connected, built in {:.2?}", layout.name, g.edges().len(), 100.0 * pairs as f64 / (n * n) as f64, t.elapsed());
+            }
+        }
+    }
+
+    /// Pictures to look at: the medium maze's graph and a coverage heat map
+    /// of random walks, written to the temp directory; run with
+    /// `cargo test --release -p planner -- --ignored --nocapture pictures`.
+    #[test]
+    #[ignore = "writes pictures for a human to look at"]
+    fn pictures() {
+        let dir = std::env::temp_dir().join("planner-pictures");
+        for (maze, dk) in [(Maze::Medium, false), (Maze::Small, true)] {
+            let layout = maze.layout(dk);
+            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 24 }, 1), &[]).expect("graph");
+            g.save_png(&dir.join(format!("{}-graph.png", layout.name)), 24).expect("png");
+            let mut env = fresh_env(&g);
+            let mut cov = crate::Coverage::for_layout(&layout);
+            let mut rng = SmallRng::seed_from_u64(0);
+            let mut batch = Vec::new();
+            for _ in 0..20_000 {
+                batch.push(env.step_meta(rng.random_range(0..3)));
+            }
+            cov.observe(&batch);
+            cov.save_png(&layout, &dir.join(format!("{}-coverage.png", layout.name)), 24).expect("png");
+        }
+        println!("pictures in {}", dir.display());
     }
 
     /// Timing figures for the closing note; run with

@@ -12,7 +12,7 @@
 //!   planner ── wg/<run>/graph (GraphHeader + nodes + edges, latest only) ──► learner, viewers
 //! ```
 //!
-//! - [`step`](crate::ObsHeader): the observation batch. [`EnvMeta`] is the
+//! - [`ObsHeader`]: the observation batch. [`EnvMeta`] is the
 //!   per-environment record; [`ObsShape`] the run's batch and grid size;
 //!   [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,
 //!   &mut [EnvMeta], &mut [u8])` so the simulator steps straight into shared
@@ -90,3 +90,29 @@ pub use step::{
 /// Version of the wire layout. Bumped on any change of a wire type; every
 /// type name ends in `.v<SCHEMA_VERSION>` and every header carries it.
 pub const SCHEMA_VERSION: u32 = 1;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raw::type_name_of;
+
+    #[test]
+    fn every_type_name_carries_the_schema_version() {
+        let names = [
+            type_name_of::<EnvMeta>(),
+            type_name_of::<ObsHeader>(),
+            type_name_of::<ActHeader>(),
+            type_name_of::<RouteRequest>(),
+            type_name_of::<RouteResponse>(),
+            type_name_of::<GraphHeader>(),
+            type_name_of::<GraphEdge>(),
+        ];
+        for name in names {
+            assert!(name.starts_with("wg."), "{name}");
+            assert!(
+                name.ends_with(&format!(".v{SCHEMA_VERSION}")),
+                "{name} does not end in .v{SCHEMA_VERSION}"
+            );
+        }
+    }
+}

@@ -6,6 +6,9 @@
 //!   observation (no memset, no copy).
 //! - [`split_slice_sample`]: borrow a sample's user header and payload
 //!   mutably at the same time (iceoryx2 offers one `&mut` accessor for each).
+//! - [`force_remove_services`]: iceoryx2's last-resort removal of a
+//!   service left corrupted by a crash, guarded by a check that no other
+//!   node of the prefix is alive.
 //! - [`monotonic_ns`]: `CLOCK_MONOTONIC` in nanoseconds; [`type_name_of`]:
 //!   the type name iceoryx2 records for a payload type.
 //!
@@ -37,7 +40,10 @@ use core::fmt::Debug;
 use core::mem::MaybeUninit;
 
 use bytemuck::Pod;
-use iceoryx2::prelude::ZeroCopySend;
+use iceoryx2::node::Node;
+use iceoryx2::prelude::{
+    CallbackProgression, MessagingPattern, NodeState, ServiceName, ZeroCopySend,
+};
 use iceoryx2::response_mut::ResponseMut;
 use iceoryx2::response_mut_uninit::ResponseMutUninit;
 use iceoryx2::sample_mut::SampleMut;
@@ -93,6 +99,45 @@ where
     // only the payload bytes.
     let header = unsafe { &mut *header };
     (header, payload)
+}
+
+/// Removes the given services by force, but only while `node` is the sole
+/// live node under its prefix (dead nodes are fine: they are what left the
+/// services behind). Returns how many services existed and were removed,
+/// or the number of other live nodes as `Err`.
+pub(crate) fn force_remove_services<S: Service>(
+    node: &Node<S>,
+    services: &[(ServiceName, MessagingPattern)],
+) -> Result<Result<usize, String>, usize> {
+    let mut others_alive = 0;
+    let listed = Node::<S>::list(node.config(), |state| {
+        if let NodeState::Alive(view) = &state
+            && iceoryx2::node::NodeView::id(view) != node.id()
+        {
+            others_alive += 1;
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = listed {
+        return Ok(Err(format!("{e:?}")));
+    }
+    if others_alive > 0 {
+        return Err(others_alive);
+    }
+    let mut removed = 0;
+    for (name, pattern) in services {
+        // SAFETY: `force_remove_service` requires that no other process uses
+        // the service. Every process using a service of this prefix does so
+        // through a node registered under the prefix, and the listing above
+        // found no live node but `node`, which has not opened any service
+        // of the run (`PipelineNode::force_remove_stale_services` checks).
+        match unsafe { node.force_remove_service(name, *pattern) } {
+            Ok(true) => removed += 1,
+            Ok(false) => {}
+            Err(e) => return Ok(Err(format!("{name}: {e:?}"))),
+        }
+    }
+    Ok(Ok(removed))
 }
 
 /// The type name iceoryx2 records for `T` (its `#[type_name]`).

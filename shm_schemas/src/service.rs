@@ -34,7 +34,7 @@
 //! |---|---|---|---|---|---|
 //! | obs | pub/sub `[u64]` + `ObsHeader`, `Static` | 1 / 3 (learner, planner, one spare) | 1 | 2 | safe overflow |
 //! | act | pub/sub `[u8]` + `ActHeader`, `Static` | 1 / 2 (sim, one spare) | 0 | 2 | safe overflow |
-//! | route | req/resp, fixed size | 1 server / 4 clients, 64 active requests each | – | 1 response | no fire-and-forget |
+//! | route | req/resp, fixed size | 1 server / 3 clients, 32 active requests each | – | 1 response | no fire-and-forget |
 //! | graph | pub/sub `[u32]` + `GraphHeader`, `PowerOfTwo` | 1 / 4 | 1 | 1 | safe overflow (latest only) |
 //!
 //! The sim ↔ learner loop is lossless **by protocol**, not by
@@ -53,7 +53,10 @@
 //! retries.
 //!
 //! Chunks pre-allocated per obs publisher: `3 × (2 + 2) + 1 + 2 = 15`, each
-//! `ObsShape::payload_bytes()` plus headers.
+//! `ObsShape::payload_bytes()` plus 110 bytes of headers (7.6 MB for 1024
+//! envs on the 25×19 maze). The route server pre-allocates
+//! `clients × 2 × active × (buffer 1 + borrowed 1 + loaned 1) = 576`
+//! responses of 10.8 kB (6.3 MB).
 //!
 //! ## Permissions
 //!
@@ -62,9 +65,9 @@
 //! read-writable; [`create_node`] tightens that one to `0600`. The
 //! `dev_permissions` feature stays off.
 
-use std::cell::Cell;
 use std::fmt::Debug;
 use std::path::{Path as StdPath, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::active_request::ActiveRequest;
@@ -130,10 +133,10 @@ pub const OBS_MAX_LOANS: usize = 2;
 pub const ACT_MAX_SUBSCRIBERS: usize = 2;
 /// Act service: per-subscriber queue.
 pub const ACT_BUFFER: usize = 2;
-/// Route service: clients (learner plus tools and benchmarks).
-pub const ROUTE_MAX_CLIENTS: usize = 4;
+/// Route service: clients (the learner, a benchmark or tool, one spare).
+pub const ROUTE_MAX_CLIENTS: usize = 3;
 /// Route service: outstanding requests per client.
-pub const ROUTE_MAX_ACTIVE_REQUESTS: usize = 64;
+pub const ROUTE_MAX_ACTIVE_REQUESTS: usize = 32;
 /// Graph service: subscribers (learner, viewers).
 pub const GRAPH_MAX_SUBSCRIBERS: usize = 4;
 /// Graph publisher: initial slice capacity in `u32` words (grows by powers of two).
@@ -294,8 +297,27 @@ pub fn harden_shm_permissions(prefix: &str) -> Result<Vec<PathBuf>, ShmError> {
 }
 
 /// `/dev/shm/<prefix>*` files with their permission bits.
+///
+/// iceoryx2 names them `<prefix><40 hex digits>` followed by `_` or `.`;
+/// only such names count, so the files of run `a_b` are not mistaken for
+/// files of run `a` (whose prefix `wg_a_` is a prefix of `wg_a_b_`).
 pub fn shm_files(prefix: &str) -> Result<Vec<(PathBuf, u32)>, ShmError> {
-    files_with_prefix(StdPath::new(SHM_DIR), prefix)
+    let mut files = files_with_prefix(StdPath::new(SHM_DIR), prefix)?;
+    files.retain(|(path, _)| {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        is_iceoryx2_name_after_prefix(name.as_bytes().get(prefix.len()..).unwrap_or_default())
+    });
+    Ok(files)
+}
+
+/// `<40 hex digits>` then `_` or `.`: the hash iceoryx2 puts after the prefix.
+fn is_iceoryx2_name_after_prefix(rest: &[u8]) -> bool {
+    rest.len() > 40
+        && rest[..40].iter().all(u8::is_ascii_hexdigit)
+        && matches!(rest[40], b'_' | b'.')
 }
 
 fn files_with_prefix(dir: &StdPath, prefix: &str) -> Result<Vec<(PathBuf, u32)>, ShmError> {
@@ -749,6 +771,8 @@ pub struct PipelineNode<S: Service> {
     node: Node<S>,
     run: RunName,
     retry_timeout: Duration,
+    /// Set once this node opened any of the run's services.
+    opened: AtomicBool,
 }
 
 impl<S: Service> PipelineNode<S> {
@@ -762,6 +786,7 @@ impl<S: Service> PipelineNode<S> {
             node: create_node(config, node_name)?,
             run,
             retry_timeout: DEFAULT_RETRY_TIMEOUT,
+            opened: AtomicBool::new(false),
         })
     }
 
@@ -784,6 +809,44 @@ impl<S: Service> PipelineNode<S> {
     /// Removes stale resources of dead nodes under this node's prefix.
     pub fn cleanup_dead_nodes(&self) -> CleanupState {
         self.node.try_cleanup_dead_nodes()
+    }
+
+    /// Last resort after a crash *during service creation* left a service
+    /// that can no longer be opened (`ServiceInCorruptedState` or
+    /// `HangsInCreation` until the retry budget runs out, iceoryx2 issue
+    /// #1584): removes the run's four services by force. Refused with
+    /// [`ShmError::StillInUse`] while any other node of the prefix is alive;
+    /// call it at start-up, before this node opens any port. Returns the
+    /// number of services removed.
+    pub fn force_remove_stale_services(&self) -> Result<usize, ShmError> {
+        if self.opened.load(Ordering::Relaxed) {
+            return Err(ShmError::Ipc {
+                op: "force remove services",
+                service: self.run.to_string(),
+                detail: "this node already opened services of the run; call it first thing".into(),
+            });
+        }
+        let mut services = Vec::new();
+        for channel in Channel::ALL {
+            let pattern = if channel == Channel::Route {
+                MessagingPattern::RequestResponse
+            } else {
+                MessagingPattern::PublishSubscribe
+            };
+            services.push((service_name(&self.run, channel)?, pattern));
+        }
+        match crate::raw::force_remove_services(&self.node, &services) {
+            Ok(Ok(n)) => Ok(n),
+            Ok(Err(detail)) => Err(ShmError::Ipc {
+                op: "force remove services",
+                service: self.run.to_string(),
+                detail,
+            }),
+            Err(alive) => Err(ShmError::StillInUse {
+                prefix: config_prefix(self.node.config()),
+                alive,
+            }),
+        }
     }
 
     /// Runs `f` until it succeeds, a non-transient error occurs, or the retry
@@ -821,6 +884,10 @@ impl<S: Service> PipelineNode<S> {
             std::thread::sleep(delay);
             delay = (delay * 2).min(Duration::from_millis(64));
         }
+    }
+
+    fn mark_opened(&self) {
+        self.opened.store(true, Ordering::Relaxed);
     }
 
     fn open_failed<E: Debug>(
@@ -874,6 +941,7 @@ impl<S: Service> PipelineNode<S> {
             ],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -950,6 +1018,7 @@ impl<S: Service> PipelineNode<S> {
             ],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -1028,6 +1097,7 @@ impl<S: Service> PipelineNode<S> {
             attrs: vec![(ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string())],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -1056,6 +1126,7 @@ impl<S: Service> PipelineNode<S> {
         let server = self.create_port("create server", &name, || {
             service
                 .server_builder()
+                .max_loaned_responses_per_request(1)
                 .create()
                 .map_err(|e: ServerCreateError| e)
         })?;
@@ -1079,7 +1150,7 @@ impl<S: Service> PipelineNode<S> {
             client,
             _service: service,
             run_id: self.run.id(),
-            next_id: Cell::new(1),
+            next_id: AtomicU64::new(1),
         })
     }
 
@@ -1100,6 +1171,7 @@ impl<S: Service> PipelineNode<S> {
             ],
         };
         let verifier = exp.verifier()?;
+        self.mark_opened();
         let factory = self
             .retry(
                 "open service",
@@ -1226,7 +1298,10 @@ impl<S: Service> ObsPublisher<S> {
         })
     }
 
-    /// Connects subscribers that joined since the last send (delivers history).
+    /// Connects subscribers that joined since the last send and delivers
+    /// the history (the last batch) to them. iceoryx2 has no background
+    /// thread: call this periodically while waiting for an action batch,
+    /// so a learner that (re)joins receives the batch the sim waits on.
     pub fn update_connections(&self) -> Result<(), ShmError> {
         self.publisher
             .update_connections()
@@ -1532,13 +1607,17 @@ impl<S: Service> RouteCall<S> {
     }
 }
 
-/// The learner's route client.
+/// The learner's route client. At most [`ROUTE_MAX_ACTIVE_REQUESTS`]
+/// requests may be pending at once (more: `Err` from
+/// [`request`](Self::request)); dropping a [`PendingRoute`] frees its slot
+/// and withdraws the request (a request withdrawn before the planner
+/// received it is never delivered).
 #[derive(Debug)]
 pub struct RouteClient<S: Service> {
     client: Client<S, RouteRequest, (), RouteResponse, ()>,
     _service: RouteService<S>,
     run_id: u64,
-    next_id: Cell<u64>,
+    next_id: AtomicU64,
 }
 
 impl<S: Service> RouteClient<S> {
@@ -1551,8 +1630,7 @@ impl<S: Service> RouteClient<S> {
         from_dir: u8,
         to_pivot: u16,
     ) -> Result<PendingRoute<S>, ShmError> {
-        let id = self.next_id.get();
-        self.next_id.set(id + 1);
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         let request = RouteRequest::new(id, self.run_id, env, from_cell, from_dir, to_pivot);
         let pending = self
             .client

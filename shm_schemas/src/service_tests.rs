@@ -16,7 +16,10 @@ const CHILD_ROLE: &str = "WG_SHM_TEST_CHILD";
 const CHILD_PREFIX: &str = "WG_SHM_TEST_PREFIX";
 const CHILD_RUN: &str = "WG_SHM_TEST_RUN";
 /// Upper bound for anything that waits on another port or process.
-const WATCHDOG: Duration = Duration::from_secs(30);
+const WATCHDOG: Duration = Duration::from_secs(10);
+/// The process-wide backstop behind [`WATCHDOG`] (which fails a test with
+/// a message): ends the process if a test hangs in a blocking call.
+const HARD_WATCHDOG: Duration = Duration::from_secs(60);
 
 /// Ends the whole process if a test hangs (a deadlock is reported as a
 /// failure, never waited out); disarmed on drop.
@@ -28,8 +31,8 @@ impl Watchdog {
     fn arm(what: &'static str) -> Watchdog {
         let (tx, rx) = mpsc::channel::<()>();
         std::thread::spawn(move || {
-            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(WATCHDOG) {
-                eprintln!("watchdog: `{what}` still running after {WATCHDOG:?}, aborting");
+            if let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(HARD_WATCHDOG) {
+                eprintln!("watchdog: `{what}` still running after {HARD_WATCHDOG:?}, aborting");
                 std::process::exit(101);
             }
         });
@@ -148,6 +151,22 @@ fn check_batch(sample: &ObsSample<ipc::Service>, seq: u64) {
 }
 
 #[test]
+fn shm_file_names_of_one_run_only() {
+    let hash = "9204dd183d1c4d8e1ff592a30766ffa6765aa8b5";
+    assert!(is_iceoryx2_name_after_prefix(
+        format!("{hash}_node.0_10_0.global_mgmt").as_bytes()
+    ));
+    assert!(is_iceoryx2_name_after_prefix(
+        format!("{hash}_1584566279.data").as_bytes()
+    ));
+    // What follows `wg_a_` in a file of run `a_b`.
+    assert!(!is_iceoryx2_name_after_prefix(
+        format!("b_{hash}_node.0_10_0.global_mgmt").as_bytes()
+    ));
+    assert!(!is_iceoryx2_name_after_prefix(b"short"));
+}
+
+#[test]
 fn obs_roundtrip_to_two_subscribers() {
     let _w = Watchdog::arm("obs_roundtrip_to_two_subscribers");
     let t = TestPrefix::new("obs");
@@ -254,9 +273,56 @@ fn route_roundtrip() {
         RouteStatus::TooLong
     );
     let reply = pending.wait(WATCHDOG).unwrap();
+    let data: u64 = shm_files(&t.prefix)
+        .unwrap()
+        .iter()
+        .filter(|(p, _)| p.to_string_lossy().ends_with(".data"))
+        .map(|(p, _)| std::fs::metadata(p).unwrap().len())
+        .max()
+        .unwrap();
+    eprintln!("route: largest data segment (server responses) {data} B");
+    assert!(data < 8 << 20, "{data}");
     assert_eq!(
         (reply.status(), reply.actions().len()),
         (Some(RouteStatus::TooLong), 0)
+    );
+}
+
+#[test]
+fn route_edge_cases() {
+    let _w = Watchdog::arm("route_edge_cases");
+    let t = TestPrefix::new("routex");
+    let (planner, learner) = (node(&t, "planner"), node(&t, "learner"));
+    let server = planner.route_server().unwrap();
+
+    // A client that gave up before the answer: responding is harmless.
+    let client = learner.route_client().unwrap();
+    let pending = client.request(0, 1, 0, 1).unwrap();
+    let call = poll("route request", || server.receive().unwrap());
+    drop(pending);
+    assert!(!call.is_connected());
+    call.respond(1, RouteStatus::Unreachable, &[], &[], &[])
+        .unwrap();
+
+    // A request of another schema version is answered BadRequest and reported.
+    let (_, service) = learner.route_service().unwrap();
+    let raw_client = service.client_builder().create().unwrap();
+    let mut bad = RouteRequest::new(77, run().id(), 0, 1, 0, 1);
+    bad.schema_version = 9;
+    let pending = raw_client.send_copy(bad).unwrap();
+    let err = poll("bad request", || match server.receive() {
+        Ok(None) => None,
+        other => Some(other),
+    })
+    .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "route request/response schema v9 on the wire, this process speaks v1"
+    );
+    let answer = poll("bad request answer", || pending.receive().unwrap());
+    assert_eq!(
+        (answer.status(), answer.request_id),
+        (Some(RouteStatus::BadRequest), 77)
     );
 }
 
@@ -654,6 +720,37 @@ fn dead_publisher_is_detected_and_replaced() {
 }
 
 #[test]
+fn force_removal_of_a_crashed_runs_services() {
+    let _w = Watchdog::arm("force_removal_of_a_crashed_runs_services");
+    let t = TestPrefix::new("force");
+    let status = reap(spawn_child("crash", &t));
+    assert!(!status.success());
+    let sim = node(&t, "sim");
+    // Node creation cleaned the dead node up already; whatever is left of
+    // the run's services goes, and the run starts afresh.
+    let removed = sim.force_remove_stale_services().unwrap();
+    assert!(removed <= 1, "{removed}");
+    let shape = ObsShape::new(
+        TWO_PROCESS_SHAPE.0,
+        TWO_PROCESS_SHAPE.1,
+        TWO_PROCESS_SHAPE.2,
+    )
+    .unwrap();
+    let _publisher = sim.obs_publisher(shape).unwrap();
+
+    // Refused once the node has opened ports, and while other nodes live.
+    assert!(matches!(
+        sim.force_remove_stale_services(),
+        Err(ShmError::Ipc { .. })
+    ));
+    let fresh = node(&t, "learner");
+    assert!(matches!(
+        fresh.force_remove_stale_services(),
+        Err(ShmError::StillInUse { alive: 1, .. })
+    ));
+}
+
+#[test]
 fn obs_memory_scales_with_the_shape() {
     let _w = Watchdog::arm("obs_memory_scales_with_the_shape");
     // Chunks per obs publisher: subscribers × (buffer + borrowed) + history + loans.
@@ -684,4 +781,28 @@ fn obs_memory_scales_with_the_shape() {
         sizes.push(data[0]);
     }
     assert!(sizes[0] * 10 < sizes[1]);
+}
+
+#[test]
+fn threadsafe_service_ports_move_between_threads() {
+    let _w = Watchdog::arm("threadsafe_service_ports_move_between_threads");
+    let t = TestPrefix::new("threads");
+    let shape = ObsShape::new(4, 5, 5).unwrap();
+    let sim = PipelineNode::<ipc_threadsafe::Service>::new(&t.config, run(), "sim").unwrap();
+    let learner =
+        PipelineNode::<ipc_threadsafe::Service>::new(&t.config, run(), "learner").unwrap();
+    let subscriber = learner.obs_subscriber(shape).unwrap();
+    let publisher = sim.obs_publisher(shape).unwrap();
+    let reader = std::thread::spawn(move || {
+        let sample = poll("obs batch on another thread", || {
+            subscriber.receive().unwrap()
+        });
+        sample.batch().cells.iter().map(|&c| c as u32).sum::<u32>()
+    });
+    let mut sample = publisher.loan(0, 0).unwrap();
+    let batch = sample.batch_mut();
+    batch.meta.fill(EnvMeta::EMPTY);
+    batch.cells.fill(2);
+    sample.send().unwrap();
+    assert_eq!(reader.join().unwrap(), 2 * 4 * 25);
 }

@@ -12,9 +12,9 @@
 //!
 //! The payload is an iceoryx2 *slice* of `u64` words (8-byte aligned, so
 //! `EnvMeta` records can be viewed in place) sized exactly for the run's
-//! [`ObsShape`]: a sample of 256 envs on a 13×13 maze takes 48 KiB, not the
-//! 4 MiB a worst-case fixed array of `MAX_ENVS × MAX_CELLS` would pin for
-//! every chunk. The shape is fixed for the lifetime of a run, so the
+//! [`ObsShape`]: a sample of 256 envs on a 13×13 maze takes 47 KiB of
+//! payload, 1024 envs on the 25×19 maze 495 KiB, where a worst-case fixed
+//! array of `MAX_ENVS × MAX_CELLS` would pin 4.0 MiB for every chunk. The shape is fixed for the lifetime of a run, so the
 //! publisher allocates with the `Static` strategy and never regrows.
 //!
 //! [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,

@@ -12,6 +12,15 @@
 //! and L0 run over the interior states, and the transition count sees the
 //! boundaries as certain ones. The multipliers follow the stable update of
 //! docs/latent-model-math.md ("Lagrangian relaxation").
+//!
+//! **Prior fit at unit weight.** The prior `ψ` enters only the KL, so
+//! `argmin_ψ λ1·KL = argmin_ψ KL` for any `λ1 > 0`: the multiplier rescales
+//! ψ's gradient without moving its optimum. Because `λ1` can swing by orders
+//! of magnitude while it ascends, and Adam's second-moment memory then
+//! stalls the prior for hundreds of steps, the Lagrangian here splits the
+//! KL into `λ1·KL(q_φ ‖ sg(p_ψ))`, which regularises the posterior, and
+//! `KL(sg(q_φ) ‖ p_ψ)`, which fits the prior (`sg` = stop-gradient). Both have
+//! the value of the paper's KL; only their gradients are routed apart.
 
 use tch::{Kind, Tensor};
 
@@ -26,8 +35,12 @@ use super::hardkuma::{self, HardKuma};
 pub struct ElboTerms {
     /// `−E_q[log p_θ(A | S, Z)]`, one sample of `Z`.
     pub reconstruction_nll: Tensor,
-    /// `Σ_t KL(Kuma(ã_t, 1) ‖ Beta(α_t, β_t))` over interior states.
+    /// `Σ_t KL(Kuma(ã_t, 1) ‖ Beta(α_t, β_t))` over interior states, with
+    /// the prior held fixed (gradients reach the posterior only).
     pub kl: Tensor,
+    /// The same KL with the posterior held fixed (gradients reach the
+    /// prior only): the prior's fitting loss.
+    pub prior_fit: Tensor,
     /// `L0 = (E_q[‖Z‖₀] − μ0)²`.
     pub l0: Tensor,
     /// `LT = (E_q[#changes] − 2·μ0)²`.
@@ -76,7 +89,9 @@ pub fn elbo_terms(
     let interior = batch.interior_mask();
     let (nll, correct) = action_nll(logits, batch);
     let reconstruction_nll = per_trajectory_mean(&nll, &batch.state_mask);
-    let kl = per_trajectory_mean(&prior.kl_from_kuma(&posterior.a), &interior);
+    let fixed_prior = BetaPrior::new(prior.alpha.detach(), prior.beta.detach());
+    let kl = per_trajectory_mean(&fixed_prior.kl_from_kuma(&posterior.a), &interior);
+    let prior_fit = per_trajectory_mean(&prior.kl_from_kuma(&posterior.a.detach()), &interior);
 
     // P(z_t = 0) with the boundary latents certain to be 1.
     let prob_zero = posterior.prob_zero() * &interior;
@@ -91,6 +106,7 @@ pub fn elbo_terms(
     ElboTerms {
         reconstruction_nll,
         kl,
+        prior_fit,
         l0,
         transition,
         expected_kept: kept.mean(None::<Kind>).double_value(&[]),
@@ -156,9 +172,11 @@ impl Multipliers {
         }
     }
 
-    /// The Lagrangian `NLL + λ1·KL + λ2·L0 + λ3·LT` (λ held constant).
+    /// The Lagrangian `NLL + λ1·KL + λ2·L0 + λ3·LT` (λ held constant),
+    /// plus the prior's unit-weight fit (module docs).
     pub fn lagrangian(&self, terms: &ElboTerms) -> Tensor {
         &terms.reconstruction_nll
+            + &terms.prior_fit
             + &terms.kl * self.kl.value
             + &terms.l0 * self.l0.value
             + &terms.transition * self.transition.value

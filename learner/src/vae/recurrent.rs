@@ -7,27 +7,78 @@
 //! padding. Here the backward LSTM reads each trajectory reversed *within its
 //! own length* ([`TrajectoryBatch::reverse_in_time`]), and its outputs are
 //! reversed back.
+//!
+//! Both directions step `lstm_cell` through time instead of calling
+//! libtorch's fused `lstm` (which `tch::nn::LSTM` uses even for one step): on
+//! CPU that op dispatches to oneDNN, whose LSTM kernel crashed (SIGSEGV in
+//! `dnnl_memory_destroy`, libtorch 2.13) on our `[L ≈ 20, B = 32, 40]`
+//! training inputs. At these sizes the loop costs little.
 
-use tch::nn::{self, RNN};
+use tch::nn;
 use tch::Tensor;
 
 use super::batch::TrajectoryBatch;
 
-/// Two unidirectional LSTMs, one per time direction.
+/// One LSTM layer, PyTorch's gate layout and initialisation
+/// (`U(−1/√H, 1/√H)` for every weight and bias).
+#[derive(Debug)]
+pub struct LstmLayer {
+    weight_ih: Tensor,
+    weight_hh: Tensor,
+    bias_ih: Tensor,
+    bias_hh: Tensor,
+    hidden: i64,
+}
+
+impl LstmLayer {
+    /// `in_dim` inputs and `hidden` units; weights under `p`.
+    pub fn new(p: &nn::Path, in_dim: i64, hidden: i64) -> Self {
+        let bound = 1.0 / (hidden as f64).sqrt();
+        let init = nn::Init::Uniform { lo: -bound, up: bound };
+        Self {
+            weight_ih: p.var("weight_ih", &[4 * hidden, in_dim], init),
+            weight_hh: p.var("weight_hh", &[4 * hidden, hidden], init),
+            bias_ih: p.var("bias_ih", &[4 * hidden], init),
+            bias_hh: p.var("bias_hh", &[4 * hidden], init),
+            hidden,
+        }
+    }
+
+    /// Runs over `x` (`[L, B, in]`) from a zero state; returns the hidden
+    /// states `[L, B, hidden]`.
+    pub fn unroll(&self, x: &Tensor) -> Tensor {
+        let batch = x.size()[1];
+        let zeros = x.new_zeros([batch, self.hidden], (x.kind(), x.device()));
+        let (mut h, mut c) = (zeros.shallow_clone(), zeros);
+        let mut outputs = Vec::with_capacity(x.size()[0] as usize);
+        for t in 0..x.size()[0] {
+            (h, c) = x.get(t).lstm_cell(
+                &[&h, &c],
+                &self.weight_ih,
+                &self.weight_hh,
+                Some(&self.bias_ih),
+                Some(&self.bias_hh),
+            );
+            outputs.push(h.shallow_clone());
+        }
+        Tensor::stack(&outputs, 0)
+    }
+}
+
+/// Two LSTM layers, one per time direction.
 #[derive(Debug)]
 pub struct BiLstm {
-    forward: nn::LSTM,
-    backward: nn::LSTM,
+    forward: LstmLayer,
+    backward: LstmLayer,
 }
 
 impl BiLstm {
     /// `in_dim` inputs, `hidden` units per direction; weights under
     /// `p / "forward"` and `p / "backward"`.
     pub fn new(p: &nn::Path, in_dim: i64, hidden: i64) -> Self {
-        let cfg = nn::RNNConfig { batch_first: false, ..Default::default() };
         Self {
-            forward: nn::lstm(p / "forward", in_dim, hidden, cfg),
-            backward: nn::lstm(p / "backward", in_dim, hidden, cfg),
+            forward: LstmLayer::new(&(p / "forward"), in_dim, hidden),
+            backward: LstmLayer::new(&(p / "backward"), in_dim, hidden),
         }
     }
 
@@ -35,9 +86,8 @@ impl BiLstm {
     /// `[L, B, 2·hidden]`, the forward and backward hidden states at each
     /// step. Outputs on padding are meaningless and must be masked.
     pub fn seq(&self, x: &Tensor, batch: &TrajectoryBatch) -> Tensor {
-        let (ahead, _) = self.forward.seq(x);
-        let (behind_reversed, _) = self.backward.seq(&batch.reverse_in_time(x));
-        let behind = batch.reverse_in_time(&behind_reversed);
+        let ahead = self.forward.unroll(x);
+        let behind = batch.reverse_in_time(&self.backward.unroll(&batch.reverse_in_time(x)));
         Tensor::cat(&[ahead, behind], -1)
     }
 }
