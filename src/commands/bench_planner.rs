@@ -109,6 +109,7 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
         walk_len: 64,
         shorten: true,
         task: Task::MultiGoal,
+        ..PlannerConfig::default()
     };
     let t0 = Instant::now();
     let mut graph = WorldGraph::build(&layout, &cfg, &[])?;

@@ -40,10 +40,11 @@ pub struct GraphArgs {
     #[arg(long)]
     pub node_file: Option<PathBuf>,
     /// Random walks from each node when discovering edges.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 512)]
     pub walks_per_node: u32,
-    /// Most actions per random walk.
-    #[arg(long, default_value_t = 128)]
+    /// Most actions per random walk (long enough to connect sparse V_rand
+    /// nodes across the large maze).
+    #[arg(long, default_value_t = 512)]
     pub walk_len: u32,
     /// Seed of V_rand and of the walks (default: the world seed).
     #[arg(long)]
@@ -63,6 +64,7 @@ impl GraphArgs {
             walk_len: self.walk_len,
             shorten: true,
             task: world.task,
+            ..PlannerConfig::default()
         }
     }
 }
