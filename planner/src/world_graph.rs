@@ -1164,7 +1164,7 @@ mod tests {
     #[test]
     #[ignore = "prints timings; not a correctness test"]
     fn timing_rebuild_and_route_queries() {
-        for (maze, candidates) in [(Maze::Medium, CandidateSet::All), (Maze::Large, CandidateSet::Random { k: 500 })] {
+        for (maze, candidates) in [(Maze::Medium, CandidateSet::All), (Maze::Large, CandidateSet::Random { k: 500 }), (Maze::Large, CandidateSet::Random { k: 32 })] {
             let layout = maze.layout(false);
             let t = std::time::Instant::now();
             let mut g = WorldGraph::build(&layout, &cfg(candidates, 0), &[]).expect("graph");
@@ -1185,18 +1185,29 @@ mod tests {
                 lens += r.unwrap_or(0);
             }
             times.sort_unstable();
-            let p = |q: f64| times[((times.len() - 1) as f64 * q) as usize] as f64 / 1000.0;
+            let p = |times: &[u64], q: f64| times[((times.len() - 1) as f64 * q) as usize] as f64 / 1000.0;
             println!(
                 "{}: {n} nodes, {} edges, build {:.2?}, rebuild_shortest_paths {:.2?}, route_into p50 {:.2} us p99 {:.2} us max {:.2} us (mean route {:.0} actions)",
                 layout.name,
                 g.edges().len(),
                 build,
                 rebuild,
-                p(0.5),
-                p(0.99),
-                p(1.0),
+                p(&times, 0.5),
+                p(&times, 0.99),
+                p(&times, 1.0),
                 lens as f64 / times.len() as f64
             );
+            let cells = crate::pivotal::v_all(&layout);
+            let mut pose_times = Vec::with_capacity(100_000);
+            for _ in 0..100_000 {
+                let pose = cells[rng.random_range(0..cells.len())].pose(layout.width, rng.random_range(0..4));
+                let b = NodeId(rng.random_range(0..n) as u16);
+                let t = std::time::Instant::now();
+                let _ = g.route_from_pose_into(pose, b, g.initial_world(), &mut route);
+                pose_times.push(t.elapsed().as_nanos() as u64);
+            }
+            pose_times.sort_unstable();
+            println!("{}: route_from_pose_into p50 {:.2} us p99 {:.2} us", layout.name, p(&pose_times, 0.5), p(&pose_times, 0.99));
         }
     }
 }
