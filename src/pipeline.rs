@@ -54,6 +54,9 @@ pub fn world_words(w: &WorldArgs) -> Vec<String> {
     if let Some(m) = w.max_steps {
         v.extend(["--max-steps".into(), m.to_string()]);
     }
+    if let Some(b) = w.balls {
+        v.extend(["--balls".into(), b.to_string()]);
+    }
     v
 }
 

@@ -30,6 +30,11 @@ pub struct WorldArgs {
     /// Episode step limit (truncation). Default: twice the free cells.
     #[arg(long)]
     pub max_steps: Option<u32>,
+    /// Balls spawned at random per episode in the MultiGoal tasks (default
+    /// 5, the paper's; 0 keeps only the layout's balls, which makes the
+    /// dynamics deterministic, as world-graph discovery wants).
+    #[arg(long)]
+    pub balls: Option<u8>,
 }
 
 impl WorldArgs {
@@ -42,6 +47,11 @@ impl WorldArgs {
         let mut cfg = EnvConfig::for_task(self.task, &layout);
         if from_file {
             cfg.balls = BallSpawn::Layout;
+        }
+        match self.balls {
+            Some(0) => cfg.balls = BallSpawn::Layout,
+            Some(n) if !from_file => cfg.balls = BallSpawn::Random(n),
+            _ => {}
         }
         if let Some(m) = self.max_steps {
             anyhow::ensure!(m > 0, "--max-steps must be at least 1");

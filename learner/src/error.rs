@@ -61,4 +61,18 @@ pub enum LearnerError {
     /// An error from libtorch.
     #[error(transparent)]
     Torch(#[from] tch::TchError),
+    /// The batch environment failed (transport, dead peer, interruption).
+    #[error(transparent)]
+    Env(#[from] crate::batch_env::EnvError),
+    /// A checkpoint or model file could not be written or read back.
+    #[error("checkpoint {path}: {message}")]
+    Checkpoint {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// Building the world graph failed.
+    #[error(transparent)]
+    Planner(#[from] planner::PlannerError),
 }

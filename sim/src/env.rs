@@ -10,7 +10,12 @@
 //! - *drop* puts the carried object on the empty floor in front.
 //! - *toggle* opens a closed door, closes an open one, and unlocks (and
 //!   opens) a locked one when the key is carried; the key is kept.
-//! - *done* does nothing. Codes ≥ 7 are treated as *done*.
+//! - *done* does nothing. Codes 7..=254 are treated as *done*.
+//! - [`action::RESET`] (255) is not a MiniGrid action but a request from the
+//!   learner: the environment starts a new episode now (flag `RESET`, reward
+//!   0, no `DONE` flags). It travels in the action batch like any action, so
+//!   both transports support it; discovery uses it to return to the start and
+//!   replay recorded paths to pivotal states (paper section 3.2).
 //!
 //! ## Episode end and auto-reset
 //! An episode **terminates** at the exit or on lava, and is **truncated** when
@@ -55,6 +60,8 @@ pub mod action {
     pub const TOGGLE: u8 = 5;
     /// Do nothing.
     pub const DONE: u8 = 6;
+    /// Start a new episode now (not a MiniGrid action; see the module docs).
+    pub const RESET: u8 = 255;
     /// Names, indexed by code.
     pub const NAMES: [&str; 7] = ["left", "right", "forward", "pickup", "drop", "toggle", "done"];
 }
@@ -424,6 +431,12 @@ impl Env {
     /// Everything of a step but the grid copy.
     #[inline]
     fn advance(&mut self, action: u8, meta: &mut EnvMeta) {
+        if action == action::RESET {
+            self.reset_state();
+            *meta = EnvMeta { flags: flags::RESET, ..EnvMeta::EMPTY };
+            self.write_agent(meta);
+            return;
+        }
         if self.done_flags != 0 {
             // AutoReset::Off and the episode is over: nothing moves.
             meta.reward = 0.0;

@@ -244,3 +244,19 @@ fn minigrid_encoding_includes_the_agent() {
     assert_eq!(enc[8], [8, 1, 0], "exit is MiniGrid's green goal");
     assert_eq!(enc[0], [2, 5, 0], "grey wall");
 }
+
+#[test]
+fn the_reset_action_starts_a_new_episode_on_demand() {
+    let mut e = env("######\n#>..E#\n######\n", Task::MultiGoal);
+    run(&mut e, &[FORWARD, RIGHT]);
+    let m = e.step_meta(RESET);
+    assert_eq!(m.flags, flags::RESET, "no DONE flags, only RESET");
+    assert_eq!(m.reward, 0.0);
+    assert_eq!((m.x, m.y, m.dir), (1, 1, 0), "back at the start");
+    assert_eq!(e.steps(), 0);
+    // It also revives a finished environment under AutoReset::Off.
+    run(&mut e, &[FORWARD, FORWARD, FORWARD]);
+    assert!(e.is_done());
+    e.step_meta(RESET);
+    assert!(!e.is_done());
+}

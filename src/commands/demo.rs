@@ -25,7 +25,7 @@ pub struct DemoArgs {
 /// Renders the medium maze (ASCII and PNG, plus a grid of 16 episodes'
 /// starts) and measures batched simulation throughput.
 pub fn run(a: DemoArgs) -> anyhow::Result<std::process::ExitCode> {
-    let world = WorldArgs { maze: Maze::Medium, layout: None, task: Task::MultiGoal, seed: a.seed, max_steps: None };
+    let world = WorldArgs { maze: Maze::Medium, layout: None, task: Task::MultiGoal, seed: a.seed, max_steps: None, balls: None };
     let (layout, cfg) = world.build()?;
     let (w, h) = (layout.width, layout.height);
     let mut batch = BatchEnv::new(layout, cfg, 16, a.seed, 1)?;
