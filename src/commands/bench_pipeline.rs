@@ -27,7 +27,7 @@ use sim::{BatchEnv, StepOut};
 
 use super::run::{RunCmdArgs, teardown};
 use crate::latency::Latencies;
-use crate::roles::OnPeerDeath;
+use crate::roles::{OnPeerDeath, RunArgs};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::world::WorldArgs;
@@ -148,10 +148,12 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
     let args = RunCmdArgs {
         world: a.world.clone(),
         graph: GraphArgs { nodes: 32, node_file: None, walks_per_node: 64, walk_len: 64, graph_seed: None },
-        run: run.clone(),
-        run_dir: Some(dir.path().to_path_buf()),
-        on_peer_death: OnPeerDeath::Exit,
-        duration: None,
+        run: RunArgs {
+            run: run.clone(),
+            run_dir: Some(dir.path().to_path_buf()),
+            on_peer_death: OnPeerDeath::Exit,
+            duration: None,
+        },
         envs: a.envs,
         threads: a.threads,
         policy: PolicyKind::Random,

@@ -18,7 +18,7 @@ use shm_schemas::service::{RunName, run_config, teardown_run};
 use crate::pipeline::{Pipeline, Role, world_words};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
-use crate::roles::{EXIT_PEER_DIED, OnPeerDeath};
+use crate::roles::{EXIT_PEER_DIED, OnPeerDeath, RunArgs};
 use crate::world::WorldArgs;
 
 /// `run` options.
@@ -28,19 +28,10 @@ pub struct RunCmdArgs {
     pub world: WorldArgs,
     #[command(flatten)]
     pub graph: GraphArgs,
-    /// Run name (shared-memory services `wg/<run>/...`).
-    #[arg(long, default_value = "default")]
-    pub run: String,
-    /// Run directory [default: runs/<run>].
-    #[arg(long)]
-    pub run_dir: Option<PathBuf>,
-    /// When a process dies: restart it and let its peers wait (`wait`), or
-    /// stop the whole run (`exit`).
-    #[arg(long, value_enum, default_value = "wait")]
-    pub on_peer_death: OnPeerDeath,
-    /// Stop after this many seconds (default: until Ctrl-C).
-    #[arg(long)]
-    pub duration: Option<f64>,
+    /// Run name, directory, peer-death policy (`wait` also restarts a
+    /// process that died) and duration, passed on to every process.
+    #[command(flatten)]
+    pub run: RunArgs,
     /// Environments in the batch.
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
@@ -61,7 +52,7 @@ pub struct RunCmdArgs {
 impl RunCmdArgs {
     /// The run directory.
     pub fn dir(&self) -> PathBuf {
-        self.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(&self.run))
+        self.run.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(&self.run.run))
     }
 
     /// The argument list of `role`'s process.
@@ -74,11 +65,11 @@ impl RunCmdArgs {
         v.extend(world_words(&self.world));
         v.extend([
             "--run".into(),
-            self.run.clone(),
+            self.run.run.clone(),
             "--run-dir".into(),
             self.dir().display().to_string(),
             "--on-peer-death".into(),
-            match self.on_peer_death {
+            match self.run.on_peer_death {
                 OnPeerDeath::Wait => "wait".into(),
                 OnPeerDeath::Exit => "exit".into(),
             },
@@ -192,11 +183,11 @@ pub fn print_summary(dir: &Path, restarts: &[(Role, u32)], leftovers: &[PathBuf]
 
 /// Runs `worldgraph run`.
 pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
-    RunName::new(&a.run)?;
+    RunName::new(&a.run.run)?;
     let stop = stop_flag()?;
     let mut p = a.pipeline()?;
     p.start_all()?;
-    let deadline = a.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let deadline = a.run.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut failed = false;
     'watch: loop {
         std::thread::sleep(Duration::from_millis(50));
@@ -209,7 +200,7 @@ pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
                 break 'watch;
             }
             eprintln!("run: the {} process died ({status})", role.name());
-            if a.on_peer_death == OnPeerDeath::Wait {
+            if a.run.on_peer_death == OnPeerDeath::Wait {
                 eprintln!("run: restarting the {} process", role.name());
                 p.spawn(role)?;
             } else {
@@ -219,7 +210,7 @@ pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
         }
     }
     p.stop_all(Duration::from_secs(3));
-    let leftovers = teardown(&a.run)?;
+    let leftovers = teardown(&a.run.run)?;
     let restarts: Vec<(Role, u32)> = Role::ALL.iter().map(|&r| (r, p.restarts(r))).collect();
     print_summary(&a.dir(), &restarts, &leftovers);
     Ok(if failed { std::process::ExitCode::FAILURE } else { std::process::ExitCode::SUCCESS })

@@ -32,7 +32,7 @@ use serde::Serialize;
 
 use super::run::{RunCmdArgs, stop_flag, teardown};
 use crate::pipeline::Role;
-use crate::roles::OnPeerDeath;
+use crate::roles::{OnPeerDeath, RunArgs};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;
@@ -134,10 +134,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
     let args = RunCmdArgs {
         world: a.world.clone(),
         graph: GraphArgs { nodes: 32, node_file: None, walks_per_node: 128, walk_len: 64, graph_seed: None },
-        run: run.clone(),
-        run_dir: Some(dir.clone()),
-        on_peer_death: OnPeerDeath::Wait,
-        duration: None,
+        run: RunArgs { run: run.clone(), run_dir: Some(dir.clone()), on_peer_death: OnPeerDeath::Wait, duration: None },
         envs: a.envs,
         threads: 1,
         policy: PolicyKind::Random,
