@@ -148,6 +148,13 @@ fn a_killed_learner_is_noticed_and_a_restarted_one_rejoins_without_losing_batche
     let after = killed.elapsed();
     eprintln!("sim noticed the dead learner after {after:?}");
     let seq_at_restart = last_seq(dir.path()).unwrap();
+    // On request (SIGUSR1) the waiting sim prints its latency table.
+    let _ = Command::new("kill").args(["-USR1", &sim.id().to_string()]).status();
+    assert!(
+        wait_for(Duration::from_secs(10), || std::fs::read_to_string(dir.path().join("sim.log"))
+            .is_ok_and(|l| l.contains("sim latency (µs)"))),
+        "SIGUSR1 printed the percentile table"
+    );
     let mut learner2 = role(dir.path(), "learner2.log", &[&["learner", "serve"][..], &common].concat());
     assert!(
         wait_for(Duration::from_secs(30), || last_seq(dir.path()).is_some_and(|s| s > seq_at_restart + 1000)),

@@ -182,6 +182,7 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         if batches % 64 == 0 && Instant::now() >= next_log {
             next_log = Instant::now() + Duration::from_millis(250);
             writeln!(stream_log, "{}", stream_line(env.stats()))?;
+            ctx.report_on_request(&lat);
         }
     }
     writeln!(stream_log, "{}", stream_line(env.stats()))?;

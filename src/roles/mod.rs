@@ -9,7 +9,8 @@
 //!   answers route requests, publishes graph snapshots.
 //!
 //! Each role registers SIGINT/SIGTERM handlers that only set a flag; the hot
-//! loops poll it, so a stop always ends with reports written. Peers are
+//! loops poll it, so a stop always ends with reports written. SIGUSR1 asks a
+//! running process for its latency table and reports without stopping it. Peers are
 //! watched through iceoryx2's node registry: a process whose peer's node is
 //! dead or missing for [`PEER_TIMEOUT`] says so and, as the user chose with
 //! `--on-peer-death`, waits for a restarted peer or exits cleanly.
@@ -83,6 +84,8 @@ pub struct RunCtx {
     pub on_peer_death: OnPeerDeath,
     /// Set by SIGINT/SIGTERM or when the duration is over.
     pub stop: Arc<AtomicBool>,
+    /// Set by SIGUSR1: print the latency table and write the reports now.
+    report: Arc<AtomicBool>,
     deadline: Option<Instant>,
 }
 
@@ -97,11 +100,14 @@ impl RunCtx {
         for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
             signal_hook::flag::register(sig, Arc::clone(&stop)).context("cannot install signal handlers")?;
         }
+        let report = Arc::new(AtomicBool::new(false));
+        signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&report))
+            .context("cannot install the SIGUSR1 handler")?;
         if let Some(d) = a.duration {
             anyhow::ensure!(d > 0.0, "--duration must be positive");
         }
         let deadline = a.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
-        Ok(RunCtx { run, config, dir, on_peer_death: a.on_peer_death, stop, deadline })
+        Ok(RunCtx { run, config, dir, on_peer_death: a.on_peer_death, stop, report, deadline })
     }
 
     /// True once a stop was requested or the duration is over.
@@ -110,6 +116,17 @@ impl RunCtx {
             self.stop.store(true, Ordering::Relaxed);
         }
         self.stop.load(Ordering::Relaxed)
+    }
+
+    /// On SIGUSR1 (`kill -USR1 <pid>`): prints `lat`'s percentile table and
+    /// writes its `.hgrm` files and plot into the run directory.
+    pub fn report_on_request(&self, lat: &crate::latency::Latencies) {
+        if self.report.swap(false, Ordering::Relaxed) {
+            eprint!("{}", lat.table());
+            if let Err(e) = lat.write_reports(&self.dir) {
+                eprintln!("cannot write the latency reports: {e:#}");
+            }
+        }
     }
 
     /// Whether a live node named `name` is registered in this run.

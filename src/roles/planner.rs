@@ -227,6 +227,7 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 break;
             }
             snapshots.update_connections()?;
+            ctx.report_on_request(&lat);
             match sim_watch.poll(&ctx) {
                 PeerEvent::Died => {
                     eprintln!("planner: the sim is gone (no live '{SIM_NODE}' node)");

@@ -164,6 +164,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             if ctx.should_stop() {
                 break 'run;
             }
+            ctx.report_on_request(&lat);
             match learner.poll(&ctx) {
                 PeerEvent::Died => {
                     eprintln!("sim: the learner is gone (no live '{LEARNER_NODE}' node for {:?})", super::PEER_TIMEOUT);
@@ -227,6 +228,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 next_minute += Duration::from_secs(60);
             }
             writeln!(stats, "{}", serde_json::to_string(&line)?)?;
+            ctx.report_on_request(&lat);
             interval.reset();
             (last_stats_seq, last_stats_t) = (seq, sent_at);
             next_stats = sent_at + STATS_EVERY;
