@@ -190,7 +190,11 @@ fn a_role_exits_cleanly_when_its_peer_dies_if_asked_to() {
     assert_eq!(report["stopped_by"], "sim died");
     // The killed sim left its resources; the next start of the run cleans them up.
     let mut sim2 = role(dir.path(), "sim2.log", &["sim", "serve", "--run", &run, "--run-dir", d, "--maze", "small", "--envs", "8"]);
-    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        wait_for(Duration::from_secs(20), || std::fs::read_to_string(dir.path().join("sim2.log"))
+            .is_ok_and(|l| l.contains("publishing"))),
+        "the second sim starts over the killed one's leftovers"
+    );
     sigterm(&sim2);
     assert!(wait_exit(&mut sim2, Duration::from_secs(20)).success());
     assert!(wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()), "left behind: {:?}", shm_files(&run));
