@@ -14,6 +14,8 @@
 pub mod actor_critic;
 pub mod batch_env;
 pub mod error;
+pub mod gae;
+pub mod gcp;
 pub mod policy;
 pub mod shm_env;
 pub mod vae;

@@ -2,3 +2,5 @@
 
 // tch trains a tiny network: libtorch links, autograd and Adam work.
 mod tch_smoke;
+// π_g learns to reach nearby goals; curiosity and trajectories are wired.
+mod gcp_learns;
