@@ -35,6 +35,9 @@ enum Command {
     /// The three processes for M minutes, optionally killing one every S
     /// seconds; reports losses, leaks, recoveries and p99 per minute.
     Soak(commands::soak::SoakArgs),
+    /// Stage 1: discover pivotal states and build the world graph (latent
+    /// model + goal-conditioned policy), resumable, with pictures.
+    Discover(commands::discover::DiscoverArgs),
     /// Simulator tools: render a maze, trace an action sequence.
     #[command(subcommand)]
     Sim(commands::sim::SimCommand),
@@ -68,6 +71,7 @@ fn run() -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Demo(args) => commands::demo::run(args),
         Command::Run(a) => commands::run::run(a),
+        Command::Discover(a) => commands::discover::run(a),
         Command::Soak(a) => commands::soak::run(a),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
@@ -76,7 +80,18 @@ fn run() -> anyhow::Result<ExitCode> {
     }
 }
 
+/// libtorch's intra-op threads. One by default: on the 2-core target the
+/// other core belongs to the simulator (or to the peer process), and an
+/// OpenMP pool spinning against a busy core costs far more than it gains on
+/// these small models. `WORLDGRAPH_TORCH_THREADS` overrides it.
+fn set_torch_threads() {
+    let n = std::env::var("WORLDGRAPH_TORCH_THREADS").ok().and_then(|v| v.parse::<i32>().ok()).unwrap_or(1);
+    tch::set_num_threads(n.max(1));
+    tch::set_num_interop_threads(1);
+}
+
 fn main() -> ExitCode {
+    set_torch_threads();
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("WORLDGRAPH_LOG").unwrap_or_else(|_| "info".into()),

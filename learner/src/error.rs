@@ -75,4 +75,14 @@ pub enum LearnerError {
     /// Building the world graph failed.
     #[error(transparent)]
     Planner(#[from] planner::PlannerError),
+    /// Training or evaluating the goal-conditioned policy failed (boxed:
+    /// `GcpError` itself can hold a `LearnerError`).
+    #[error(transparent)]
+    Gcp(Box<crate::gcp::GcpError>),
+}
+
+impl From<crate::gcp::GcpError> for LearnerError {
+    fn from(e: crate::gcp::GcpError) -> Self {
+        LearnerError::Gcp(Box::new(e))
+    }
 }

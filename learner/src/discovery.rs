@@ -1,0 +1,540 @@
+//! Stage 1 of Shang et al. 2019 (section 3; DESIGN.md section 1, steps 1–6):
+//! world graph discovery.
+//!
+//! Each **round** of the loop:
+//! 1. *collects trajectories*: random walks started from the agent's start
+//!    state and from the current pivotal states, which the agent reaches by
+//!    replaying the action path it recorded the first time it got there
+//!    (paper section 3.2, "the agent records the paths it took"); and
+//!    rollouts of the goal-conditioned policy `π_g`;
+//! 2. *trains the latent model* (section 3.1) on the collected trajectories;
+//! 3. *updates the pivotal states* `V_p`: the top `pivotal_ratio` of the
+//!    visited cells by prior mean;
+//! 4. *trains `π_g`* with the curiosity bonus (section 3.2).
+//!
+//! The loop stops when the latent model's reconstruction accuracy has not
+//! improved by `min_improvement` for `patience` rounds, or at `max_rounds`.
+//! Then [`Discovery::build_graph`] connects `V_p` into the world graph
+//! (section 3.3) with the planner.
+//!
+//! Everything runs on a [`BatchEnvironment`], so the loop is the same in
+//! process and over the shared-memory pipeline. Each round starts by
+//! resetting every environment and reseeding from `(seed, round)`, so a run
+//! resumed from a checkpoint continues as the run that was interrupted would
+//! have (its weights, pivotal states, recorded paths and history are saved
+//! at the end of every round).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use sim::{Layout, Object, action, flags};
+
+use crate::batch_env::{BatchEnvironment, EnvError};
+use crate::error::LearnerError;
+use crate::gcp::{GcpConfig, GcpStats, GoalConditionedPolicy};
+use crate::vae::{AgentPose, LatentConfig, LatentTrainer, Trajectory, TrajectoryBatch};
+
+/// Settings of the discovery loop (CPU-sized defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DiscoveryConfig {
+    /// Seed of everything random in the loop.
+    pub seed: u64,
+    /// Most rounds (the budget).
+    pub max_rounds: u32,
+    /// Rounds without improvement of the reconstruction accuracy before stopping.
+    pub patience: u32,
+    /// Smallest accuracy gain that counts as an improvement.
+    pub min_improvement: f64,
+    /// Random-walk steps per environment per round.
+    pub walk_steps_per_round: u32,
+    /// Length of one random walk (actions).
+    pub walk_len: u32,
+    /// Fraction of walks started from a pivotal state (once there are some).
+    pub from_pivotal: f64,
+    /// Latent-model updates per round.
+    pub latent_steps_per_round: u32,
+    /// Trajectories per latent-model update.
+    pub latent_batch: usize,
+    /// Most trajectories kept for training (the newest).
+    pub buffer: usize,
+    /// `π_g` A2C iterations per round (0: random walks only).
+    pub gcp_iters_per_round: u32,
+    /// Fraction of visited cells that become pivotal states (paper: 0.2).
+    pub pivotal_ratio: f64,
+    /// The latent model.
+    pub latent: LatentConfig,
+    /// The goal-conditioned policy.
+    pub gcp: GcpConfig,
+}
+
+impl Default for DiscoveryConfig {
+    fn default() -> Self {
+        DiscoveryConfig {
+            seed: 0,
+            max_rounds: 30,
+            patience: 4,
+            min_improvement: 0.005,
+            walk_steps_per_round: 256,
+            walk_len: 24,
+            from_pivotal: 0.5,
+            latent_steps_per_round: 40,
+            latent_batch: 64,
+            buffer: 4096,
+            gcp_iters_per_round: 8,
+            pivotal_ratio: 0.2,
+            latent: LatentConfig::default(),
+            gcp: GcpConfig::default(),
+        }
+    }
+}
+
+impl DiscoveryConfig {
+    /// Checks the values once, before anything is built.
+    pub fn validate(&self) -> Result<(), LearnerError> {
+        let bad = |field: &'static str, reason: &str| Err(LearnerError::Config(crate::ConfigError::new(field, reason)));
+        if self.max_rounds == 0 {
+            return bad("max_rounds", "must be at least 1");
+        }
+        if self.walk_len == 0 || self.walk_steps_per_round < self.walk_len {
+            return bad("walk_len", "must be at least 1 and at most walk_steps_per_round");
+        }
+        if !(0.0..=1.0).contains(&self.from_pivotal) {
+            return bad("from_pivotal", "must be in [0, 1]");
+        }
+        if !(self.pivotal_ratio > 0.0 && self.pivotal_ratio <= 1.0) {
+            return bad("pivotal_ratio", "must be in (0, 1]");
+        }
+        if self.latent_batch == 0 || self.buffer < self.latent_batch {
+            return bad("latent_batch", "must be at least 1 and at most buffer");
+        }
+        self.latent.validate()?;
+        self.gcp.validate()?;
+        Ok(())
+    }
+}
+
+/// Figures of one round (the discovery curves).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RoundStats {
+    /// Round index, from 0.
+    pub round: u32,
+    /// Environment steps taken in the round.
+    pub env_steps: u64,
+    /// Trajectories collected in the round (walks and `π_g` goal episodes).
+    pub trajectories: usize,
+    /// Reconstruction accuracy of the latent model on this round's trajectories.
+    pub reconstruction_accuracy: f64,
+    /// Mean KL of the last update.
+    pub kl: f64,
+    /// Fraction of interior states kept by the posterior.
+    pub kept_fraction: f64,
+    /// `π_g` goal success rate during the round's training.
+    pub gcp_success: f64,
+    /// Mean curiosity bonus of `π_g`'s rollouts.
+    pub gcp_curiosity: f64,
+    /// Distinct cells visited so far.
+    pub cells_visited: usize,
+    /// Size of `V_p` after the round.
+    pub pivotal_states: usize,
+    /// Seconds the round took.
+    pub seconds: f64,
+}
+
+/// What is checkpointed besides the weights.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct State {
+    config: DiscoveryConfig,
+    layout_name: String,
+    rounds_done: u32,
+    history: Vec<RoundStats>,
+    visits: BTreeMap<u32, u64>,
+    /// Shortest recorded action path from the start to each visited cell.
+    paths: BTreeMap<u32, Vec<u8>>,
+    pivotal: Vec<u32>,
+    best_accuracy: f64,
+    rounds_without_improvement: u32,
+    buffer: Vec<(Vec<(u32, u8, u8)>, Vec<u8>)>,
+}
+
+/// The discovery loop's models and bookkeeping.
+pub struct Discovery {
+    layout: Layout,
+    state: State,
+    latent: LatentTrainer,
+    gcp: GoalConditionedPolicy,
+    buffer: Vec<Trajectory>,
+}
+
+impl std::fmt::Debug for Discovery {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Discovery").field("rounds_done", &self.state.rounds_done).finish_non_exhaustive()
+    }
+}
+
+/// The pose the latent model reads from an observation record.
+pub fn pose_of(m: &sim::EnvMeta, width: usize) -> AgentPose {
+    let carried = if m.carrying == sim::EnvMeta::CARRYING_NOTHING { 0 } else { m.carrying + 1 };
+    AgentPose { cell: m.y as u32 * width as u32 + m.x as u32, direction: m.dir & 3, carried }
+}
+
+/// Doorway cells of a layout: passable cells with walls on two opposite
+/// sides and passable cells on the other two (the one-cell gaps between
+/// rooms that pivotal states should find).
+pub fn doorway_cells(layout: &Layout) -> Vec<u32> {
+    let wall = |x: usize, y: usize| layout.object(x, y) == Object::Wall;
+    let mut out = Vec::new();
+    for y in 1..layout.height - 1 {
+        for x in 1..layout.width - 1 {
+            if wall(x, y) {
+                continue;
+            }
+            let horizontal = wall(x - 1, y) && wall(x + 1, y) && !wall(x, y - 1) && !wall(x, y + 1);
+            let vertical = wall(x, y - 1) && wall(x, y + 1) && !wall(x - 1, y) && !wall(x + 1, y);
+            if horizontal || vertical {
+                out.push(layout.cell_index(x, y) as u32);
+            }
+        }
+    }
+    out
+}
+
+enum Phase {
+    NeedReset,
+    Replay { path: Vec<u8>, next: usize },
+    Walk { left: u32 },
+}
+
+struct Walker {
+    phase: Phase,
+    /// Actions since the last reset (the path from the start).
+    prefix: Vec<u8>,
+    states: Vec<AgentPose>,
+    actions: Vec<u8>,
+}
+
+impl Discovery {
+    /// A fresh discovery on `layout` with `num_envs` environments.
+    pub fn new(cfg: DiscoveryConfig, layout: &Layout, num_envs: usize, num_actions: usize) -> Result<Discovery, LearnerError> {
+        let mut cfg = cfg;
+        cfg.latent.num_cells = (layout.width * layout.height) as i64;
+        cfg.latent.num_actions = cfg.latent.num_actions.max(num_actions as i64);
+        cfg.validate()?;
+        tch::manual_seed(cfg.seed as i64);
+        let latent = LatentTrainer::new(&cfg.latent, tch::Device::Cpu)?;
+        let gcp = GoalConditionedPolicy::new(&cfg.gcp, layout, num_envs, num_actions, cfg.seed)?;
+        let state = State {
+            config: cfg,
+            layout_name: layout.name.clone(),
+            rounds_done: 0,
+            history: Vec::new(),
+            visits: BTreeMap::new(),
+            paths: BTreeMap::new(),
+            pivotal: Vec::new(),
+            best_accuracy: 0.0,
+            rounds_without_improvement: 0,
+            buffer: Vec::new(),
+        };
+        Ok(Discovery { layout: layout.clone(), state, latent, gcp, buffer: Vec::new() })
+    }
+
+    /// The configuration in force (with the maze's sizes filled in).
+    pub fn config(&self) -> &DiscoveryConfig {
+        &self.state.config
+    }
+
+    /// Rounds completed.
+    pub fn rounds_done(&self) -> u32 {
+        self.state.rounds_done
+    }
+
+    /// The curves so far.
+    pub fn history(&self) -> &[RoundStats] {
+        &self.state.history
+    }
+
+    /// The current pivotal states `V_p` (cell indices), most pivotal first.
+    pub fn pivotal_states(&self) -> &[u32] {
+        &self.state.pivotal
+    }
+
+    /// Cells visited so far, with visit counts.
+    pub fn visits(&self) -> &BTreeMap<u32, u64> {
+        &self.state.visits
+    }
+
+    /// The latent model.
+    pub fn latent(&self) -> &LatentTrainer {
+        &self.latent
+    }
+
+    /// The goal-conditioned policy.
+    pub fn gcp(&mut self) -> &mut GoalConditionedPolicy {
+        &mut self.gcp
+    }
+
+    /// True when the accuracy plateaued or the round budget is spent.
+    pub fn finished(&self) -> bool {
+        let c = &self.state.config;
+        self.state.rounds_done >= c.max_rounds || self.state.rounds_without_improvement >= c.patience
+    }
+
+    /// Prior mean of every cell index of the grid (walls included; 0 for
+    /// cells never visited is *not* assumed: the prior is a function of the
+    /// state alone).
+    pub fn prior_means(&self) -> Vec<f32> {
+        let cells: Vec<u32> = (0..(self.layout.width * self.layout.height) as u32).collect();
+        self.latent.model().prior_mean(&cells)
+    }
+
+    /// Step 1: random walks from the start and from pivotal states.
+    ///
+    /// Each environment runs a small state machine: reset to the start;
+    /// then either replay the recorded path to a random pivotal state or
+    /// not; then `walk_len` uniformly random actions, recorded as a
+    /// trajectory. Every step first records the outcome of the previous
+    /// action (the observed pose), then picks the next action. The first
+    /// time a cell is reached, or by a shorter path, the actions since the
+    /// reset are recorded as the way back to it.
+    fn collect_walks(&mut self, env: &mut dyn BatchEnvironment, rng: &mut SmallRng) -> Result<(Vec<Trajectory>, u64), EnvError> {
+        let cfg = self.state.config.clone();
+        let n = env.num_envs();
+        let width = env.observe().width;
+        let num_actions = env.num_actions() as u8;
+        let mut walkers: Vec<Walker> = (0..n)
+            .map(|_| Walker { phase: Phase::NeedReset, prefix: Vec::new(), states: Vec::new(), actions: Vec::new() })
+            .collect();
+        let mut out = Vec::new();
+        let mut actions = vec![0u8; n];
+        let steps = cfg.walk_steps_per_round as u64;
+        for _ in 0..steps {
+            let obs = env.observe();
+            for (i, w) in walkers.iter_mut().enumerate() {
+                let m = obs.meta[i];
+                let pose = pose_of(&m, width);
+                // An ended episode auto-reset: the agent is back at the start
+                // and the last action's outcome is lost.
+                let ended = m.flags & flags::DONE != 0;
+                if ended {
+                    w.prefix.clear();
+                }
+                let awaiting_outcome = !w.actions.is_empty() && w.states.len() == w.actions.len();
+                if awaiting_outcome {
+                    if ended {
+                        w.actions.pop();
+                    } else {
+                        w.states.push(pose);
+                    }
+                }
+                if ended || (awaiting_outcome && matches!(w.phase, Phase::Walk { left: 0 })) {
+                    finish(w, &mut out);
+                    w.phase = Phase::NeedReset;
+                }
+                if !ended {
+                    *self.state.visits.entry(pose.cell).or_default() += 1;
+                    let known = self.state.paths.get(&pose.cell).map_or(usize::MAX, Vec::len);
+                    if w.prefix.len() < known {
+                        self.state.paths.insert(pose.cell, w.prefix.clone());
+                    }
+                }
+                actions[i] = match &mut w.phase {
+                    Phase::NeedReset => {
+                        w.prefix.clear();
+                        let pivot = (!self.state.pivotal.is_empty() && rng.random_bool(cfg.from_pivotal))
+                            .then(|| self.state.pivotal[rng.random_range(0..self.state.pivotal.len())]);
+                        w.phase = match pivot.and_then(|p| self.state.paths.get(&p)) {
+                            Some(path) if !path.is_empty() => Phase::Replay { path: path.clone(), next: 0 },
+                            _ => Phase::Walk { left: cfg.walk_len },
+                        };
+                        action::RESET
+                    }
+                    Phase::Replay { path, next } => {
+                        let a = path[*next];
+                        *next += 1;
+                        if *next == path.len() {
+                            w.phase = Phase::Walk { left: cfg.walk_len };
+                        }
+                        w.prefix.push(a);
+                        a
+                    }
+                    Phase::Walk { left } => {
+                        if w.actions.is_empty() {
+                            w.states.clear();
+                            w.states.push(pose);
+                        }
+                        let a = rng.random_range(0..num_actions);
+                        w.actions.push(a);
+                        w.prefix.push(a);
+                        *left -= 1;
+                        a
+                    }
+                };
+            }
+            env.step(&actions)?;
+        }
+        Ok((out, steps * n as u64))
+    }
+
+    /// One round of the loop (steps 1–4).
+    pub fn round(&mut self, env: &mut dyn BatchEnvironment) -> Result<RoundStats, LearnerError> {
+        let t0 = std::time::Instant::now();
+        let cfg = self.state.config.clone();
+        let round = self.state.rounds_done;
+        let mut rng = SmallRng::seed_from_u64(sim::env_seed(cfg.seed, 0x100_0000 + round as u64));
+        tch::manual_seed(sim::env_seed(cfg.seed, round as u64) as i64);
+        let n = env.num_envs();
+        env.step(&vec![action::RESET; n]).map_err(LearnerError::from)?;
+
+        // 1. Trajectories: random walks, then π_g rollouts.
+        let (mut fresh, mut env_steps) = self.collect_walks(env, &mut rng)?;
+        let mut gcp_stats: Vec<GcpStats> = Vec::new();
+        for _ in 0..cfg.gcp_iters_per_round {
+            let curiosity = (round > 0).then(|| self.latent.model());
+            gcp_stats.push(self.gcp.train_iteration(env, curiosity)?);
+            env_steps += (cfg.gcp.rollout_len * n) as u64;
+        }
+        let gcp_trajectories = self.gcp.take_trajectories();
+        for t in &gcp_trajectories {
+            for s in &t.states {
+                *self.state.visits.entry(s.cell).or_default() += 1;
+            }
+        }
+        fresh.extend(gcp_trajectories.into_iter().filter(|t| !t.actions.is_empty()));
+        let collected = fresh.len();
+
+        // 2. The latent model, on the newest `buffer` trajectories.
+        self.buffer.extend(fresh.iter().cloned());
+        if self.buffer.len() > cfg.buffer {
+            let excess = self.buffer.len() - cfg.buffer;
+            self.buffer.drain(..excess);
+        }
+        let mut last = None;
+        for _ in 0..cfg.latent_steps_per_round {
+            let batch: Vec<Trajectory> =
+                (0..cfg.latent_batch).map(|_| self.buffer[rng.random_range(0..self.buffer.len())].clone()).collect();
+            let tb = TrajectoryBatch::new(&batch, &self.latent.model().config().clone(), tch::Device::Cpu)?;
+            last = Some(self.latent.train_step(&tb));
+        }
+        let eval_set: Vec<Trajectory> = fresh.iter().take(256).cloned().collect();
+        let eval = if eval_set.is_empty() {
+            None
+        } else {
+            let tb = TrajectoryBatch::new(&eval_set, &self.latent.model().config().clone(), tch::Device::Cpu)?;
+            Some(self.latent.model().evaluate(&tb))
+        };
+        let accuracy = eval.as_ref().map_or(0.0, |e| e.reconstruction_accuracy);
+
+        // 3. V_p: the top `pivotal_ratio` of the visited cells by prior mean.
+        let visited: Vec<u32> = self.state.visits.keys().copied().collect();
+        self.state.pivotal = self.latent.model().pivotal_states(&visited, cfg.pivotal_ratio);
+
+        // Plateau bookkeeping.
+        if accuracy > self.state.best_accuracy + cfg.min_improvement {
+            self.state.best_accuracy = accuracy;
+            self.state.rounds_without_improvement = 0;
+        } else {
+            self.state.rounds_without_improvement += 1;
+        }
+        let mean = |f: fn(&GcpStats) -> f64| {
+            if gcp_stats.is_empty() { 0.0 } else { gcp_stats.iter().map(f).sum::<f64>() / gcp_stats.len() as f64 }
+        };
+        let stats = RoundStats {
+            round,
+            env_steps,
+            trajectories: collected,
+            reconstruction_accuracy: accuracy,
+            kl: last.as_ref().map_or(0.0, |s| s.kl),
+            kept_fraction: eval.as_ref().map_or(0.0, |e| e.kept_fraction),
+            gcp_success: mean(|s| s.success_rate),
+            gcp_curiosity: mean(|s| s.mean_curiosity),
+            cells_visited: self.state.visits.len(),
+            pivotal_states: self.state.pivotal.len(),
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        self.state.history.push(stats.clone());
+        self.state.rounds_done += 1;
+        Ok(stats)
+    }
+
+    /// Saves the loop's state into `dir` (atomically, file by file; the
+    /// state file is written last, so a checkpoint is complete when it names
+    /// the round).
+    pub fn save(&mut self, dir: &Path) -> Result<(), LearnerError> {
+        std::fs::create_dir_all(dir).map_err(|e| ckpt(dir, e))?;
+        save_vars(self.latent.var_store(), &dir.join("latent.ot"))?;
+        save_vars(self.gcp.var_store(), &dir.join("gcp.ot"))?;
+        self.state.buffer = self
+            .buffer
+            .iter()
+            .map(|t| (t.states.iter().map(|s| (s.cell, s.direction, s.carried)).collect(), t.actions.clone()))
+            .collect();
+        let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e))?;
+        self.state.buffer.clear();
+        let path = dir.join("state.json");
+        sim::render::write_atomic(&path, &json).map_err(|e| ckpt(&path, e))
+    }
+
+    /// Resumes from a checkpoint in `dir` if there is one for this
+    /// configuration and layout; returns whether it did.
+    pub fn resume(&mut self, dir: &Path) -> Result<bool, LearnerError> {
+        let path = dir.join("state.json");
+        let Ok(bytes) = std::fs::read(&path) else { return Ok(false) };
+        let state: State = serde_json::from_slice(&bytes).map_err(|e| ckpt(&path, e))?;
+        if state.config != self.state.config || state.layout_name != self.layout.name {
+            return Err(ckpt(
+                &path,
+                format!("belongs to another configuration or maze ({}); use another run directory", state.layout_name),
+            ));
+        }
+        let latent = dir.join("latent.ot");
+        self.latent.var_store_mut().load(&latent).map_err(|e| ckpt(&latent, e))?;
+        self.gcp.load(&dir.join("gcp.ot"))?;
+        self.buffer = state
+            .buffer
+            .iter()
+            .map(|(s, a)| Trajectory {
+                states: s.iter().map(|&(cell, direction, carried)| AgentPose { cell, direction, carried }).collect(),
+                actions: a.clone(),
+            })
+            .collect();
+        self.state = State { buffer: Vec::new(), ..state };
+        Ok(true)
+    }
+
+    /// Step 6: the world graph over `V_p` (section 3.3): edges from random
+    /// walks between pivotal states, each kept path shortened by an exact
+    /// search (standing in for `π_g`'s shortening), weights = action counts.
+    pub fn build_graph(&self, task: sim::Task) -> Result<planner::WorldGraph, LearnerError> {
+        let nodes = planner::pivotal::nodes_from_cells(&self.layout, &self.state.pivotal);
+        let cfg = planner::PlannerConfig {
+            candidates: planner::CandidateSet::Given,
+            seed: self.state.config.seed,
+            task,
+            ..planner::PlannerConfig::default()
+        };
+        Ok(planner::WorldGraph::build(&self.layout, &cfg, &nodes)?)
+    }
+}
+
+fn finish(w: &mut Walker, out: &mut Vec<Trajectory>) {
+    if !w.actions.is_empty() && w.states.len() == w.actions.len() + 1 {
+        out.push(Trajectory { states: std::mem::take(&mut w.states), actions: std::mem::take(&mut w.actions) });
+    }
+    w.states.clear();
+    w.actions.clear();
+}
+
+fn ckpt(path: &Path, e: impl std::fmt::Display) -> LearnerError {
+    LearnerError::Checkpoint { path: path.display().to_string(), message: e.to_string() }
+}
+
+/// `VarStore::save` through a temporary file and a rename, so a crash never
+/// leaves a torn weight file behind.
+fn save_vars(vs: &tch::nn::VarStore, path: &Path) -> Result<(), LearnerError> {
+    let tmp = path.with_extension("ot.tmp");
+    vs.save(&tmp).map_err(|e| ckpt(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| ckpt(path, e))
+}

@@ -1,0 +1,342 @@
+//! `worldgraph discover`: stage 1 of the paper (world graph discovery) on a
+//! maze, in process or as the pipeline's processes, resumable, ending with
+//! the world graph, pictures and a summary.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use iceoryx2::prelude::ipc;
+use learner::batch_env::{BatchEnvironment, InProcess};
+use learner::discovery::{Discovery, DiscoveryConfig, RoundStats, doorway_cells};
+use learner::shm_env::{ShmEnv, ShmEnvOptions};
+use serde::Serialize;
+use shm_schemas::ObsShape;
+use shm_schemas::service::{RunName, run_config};
+use sim::chart::{LineChart, Series, XScale};
+use sim::render::{Canvas, draw_grid};
+use sim::{Layout, Maze, Object, Task};
+
+use super::run::teardown;
+use crate::pipeline::{Pipeline, Role, world_words};
+use crate::roles::{LEARNER_NODE, SIM_NODE};
+use crate::world::WorldArgs;
+
+/// `discover` options.
+#[derive(Debug, Clone, Args)]
+pub struct DiscoverArgs {
+    /// Embedded maze: small, medium or large.
+    #[arg(long, default_value = "medium", conflicts_with = "layout")]
+    pub maze: Maze,
+    /// A layout file instead of an embedded maze.
+    #[arg(long)]
+    pub layout: Option<PathBuf>,
+    /// Seed of the environments and of the models.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run directory (checkpoints, graph, pictures); an interrupted run
+    /// resumes from it [default: runs/discover-<maze>-<seed>].
+    #[arg(long = "run", alias = "run-dir")]
+    pub run_dir: Option<PathBuf>,
+    /// Environments stepped in parallel.
+    #[arg(long, default_value_t = 32)]
+    pub envs: usize,
+    /// Most rounds of the loop (the budget).
+    #[arg(long)]
+    pub rounds: Option<u32>,
+    /// Rounds without accuracy improvement before stopping.
+    #[arg(long)]
+    pub patience: Option<u32>,
+    /// `π_g` A2C iterations per round (0: random walks only).
+    #[arg(long)]
+    pub gcp_iters: Option<u32>,
+    /// A JSON file of discovery settings (any subset of `DiscoveryConfig`).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Run as the pipeline's processes: the environments in a sim process,
+    /// the loop in this (learner) process, the graph built by a planner process.
+    #[arg(long)]
+    pub pipeline: bool,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What `discover` reports (also `discovery.json` in the run directory).
+#[derive(Debug, Serialize)]
+pub struct DiscoverySummary {
+    /// Maze.
+    pub maze: String,
+    /// Seed.
+    pub seed: u64,
+    /// Transport.
+    pub transport: String,
+    /// Rounds run.
+    pub rounds: u32,
+    /// Pivotal states `V_p`.
+    pub pivotal_states: usize,
+    /// Edges of the world graph.
+    pub edges: usize,
+    /// Node pairs with a path / all ordered pairs.
+    pub connected_pairs: f64,
+    /// Doorway cells of the maze.
+    pub doorways: usize,
+    /// Fraction of `V_p` that are doorway cells.
+    pub doorway_fraction_of_pivotal: f64,
+    /// Fraction of free cells that are doorways (the chance level).
+    pub doorway_fraction_of_cells: f64,
+    /// Fraction of doorways that are pivotal.
+    pub doorways_found: f64,
+    /// Latent model's reconstruction accuracy in the last round.
+    pub reconstruction_accuracy: f64,
+    /// `π_g` greedy success rate on goals within 10 steps.
+    pub gcp_success_within_10: f64,
+    /// Environment steps taken.
+    pub env_steps: u64,
+    /// Seconds of the discovery loop (this invocation plus resumed ones).
+    pub wall_seconds: f64,
+    /// Training throughput: env-steps per second of the loop.
+    pub train_steps_per_sec: f64,
+    /// The pivotal cells, most pivotal first.
+    pub pivotal_cells: Vec<[u16; 2]>,
+}
+
+fn world(a: &DiscoverArgs) -> WorldArgs {
+    WorldArgs {
+        maze: a.maze,
+        layout: a.layout.clone(),
+        task: Task::MultiGoal,
+        seed: a.seed,
+        // Long episodes and no random balls: discovery explores a fixed,
+        // deterministic maze (recorded paths must replay exactly).
+        max_steps: Some(100_000),
+        balls: Some(0),
+    }
+}
+
+/// Runs `worldgraph discover`.
+pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
+    let w = world(&a);
+    let (layout, env_cfg) = w.build()?;
+    let dir = a.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, a.seed)));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut cfg: DiscoveryConfig = match &a.config {
+        Some(p) => serde_json::from_slice(&std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?)
+            .with_context(|| format!("{} is not a valid discovery config", p.display()))?,
+        None => DiscoveryConfig::default(),
+    };
+    cfg.seed = a.seed;
+    if let Some(r) = a.rounds {
+        cfg.max_rounds = r;
+    }
+    if let Some(p) = a.patience {
+        cfg.patience = p;
+    }
+    if let Some(g) = a.gcp_iters {
+        cfg.gcp_iters_per_round = g;
+    }
+    let num_actions = env_cfg.task.num_actions();
+    let mut disc = Discovery::new(cfg, &layout, a.envs, num_actions)?;
+    let ckpt = dir.join("checkpoint");
+    if disc.resume(&ckpt)? {
+        eprintln!("discover: resuming {} after round {}", dir.display(), disc.rounds_done());
+    }
+
+    let started = Instant::now();
+    let (summary_transport, run_name) = if a.pipeline { ("pipeline", format!("discover-{}", std::process::id())) } else { ("in-process", String::new()) };
+    let mut pipeline = None;
+    let mut env: Box<dyn BatchEnvironment> = if a.pipeline {
+        let mut words = vec!["sim".to_string(), "serve".into()];
+        words.extend(world_words(&w));
+        words.extend(["--run".into(), run_name.clone(), "--run-dir".into(), dir.display().to_string()]);
+        words.extend(["--envs".into(), a.envs.to_string(), "--on-peer-death".into(), "exit".into()]);
+        let mut p = Pipeline::new(vec![(Role::Sim, words)], Some(&dir))?;
+        p.spawn(Role::Sim)?;
+        pipeline = Some(p);
+        let run = RunName::new(&run_name)?;
+        let shape = ObsShape::new(a.envs, layout.width, layout.height)?;
+        let opts = ShmEnvOptions {
+            node_name: LEARNER_NODE.into(),
+            sim_node_name: SIM_NODE.into(),
+            connect_timeout: Duration::from_secs(60),
+            ..ShmEnvOptions::default()
+        };
+        Box::new(ShmEnv::<ipc::Service>::connect(&run_config(&run)?, run, shape, num_actions, opts)?)
+    } else {
+        Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, a.seed, 1)?)
+    };
+
+    let total = disc.config().max_rounds as u64;
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("discover {bar:30} round {pos}/{len} {elapsed_precise} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_position(disc.rounds_done() as u64);
+    while !disc.finished() {
+        let s = disc.round(env.as_mut())?;
+        disc.save(&ckpt)?;
+        bar.set_position(disc.rounds_done() as u64);
+        bar.set_message(format!(
+            "acc {:.3}  π_g {:.2}  |V_p| {}  cells {}",
+            s.reconstruction_accuracy, s.gcp_success, s.pivotal_states, s.cells_visited
+        ));
+    }
+    bar.finish_and_clear();
+    let gcp_success = disc.gcp().evaluate(env.as_mut(), 10, 200)?;
+    drop(env);
+    if let Some(mut p) = pipeline {
+        p.stop_all(Duration::from_secs(3));
+        teardown(&run_name)?;
+    }
+
+    // The world graph over V_p: built here, or by the planner process.
+    let pivotal_file = dir.join("pivotal.json");
+    let cells: Vec<[u16; 2]> = disc
+        .pivotal_states()
+        .iter()
+        .map(|&c| [(c as usize % layout.width) as u16, (c as usize / layout.width) as u16])
+        .collect();
+    sim::render::write_atomic(&pivotal_file, &serde_json::to_vec(&cells)?)?;
+    let graph = if a.pipeline {
+        build_graph_in_planner(&a, &w, &dir, &pivotal_file)?
+    } else {
+        let g = disc.build_graph(Task::MultiGoal)?;
+        g.save(&dir.join("graph.json"))?;
+        g.save_png(&dir.join("graph.png"), 24)?;
+        g
+    };
+
+    let history = disc.history().to_vec();
+    let env_steps: u64 = history.iter().map(|h| h.env_steps).sum();
+    let loop_seconds: f64 = history.iter().map(|h| h.seconds).sum();
+    let doorways = doorway_cells(&layout);
+    let pivotal = disc.pivotal_states();
+    let on_doorway = pivotal.iter().filter(|c| doorways.contains(c)).count();
+    let free = layout.free_cells().len();
+    let n = graph.num_nodes();
+    let connected = (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .filter(|&(i, j)| i != j && graph.distance(planner::NodeId(i as u16), planner::NodeId(j as u16)) != planner::UNREACHABLE)
+        .count();
+    let summary = DiscoverySummary {
+        maze: layout.name.clone(),
+        seed: a.seed,
+        transport: summary_transport.into(),
+        rounds: disc.rounds_done(),
+        pivotal_states: pivotal.len(),
+        edges: graph.edges().len(),
+        connected_pairs: if n > 1 { connected as f64 / (n * (n - 1)) as f64 } else { 0.0 },
+        doorways: doorways.len(),
+        doorway_fraction_of_pivotal: on_doorway as f64 / pivotal.len().max(1) as f64,
+        doorway_fraction_of_cells: doorways.len() as f64 / free.max(1) as f64,
+        doorways_found: on_doorway as f64 / doorways.len().max(1) as f64,
+        reconstruction_accuracy: history.last().map_or(0.0, |h| h.reconstruction_accuracy),
+        gcp_success_within_10: gcp_success,
+        env_steps,
+        wall_seconds: loop_seconds,
+        train_steps_per_sec: env_steps as f64 / loop_seconds.max(1e-9),
+        pivotal_cells: cells,
+    };
+    let _ = started;
+    sim::render::write_atomic(&dir.join("discovery.json"), &serde_json::to_vec_pretty(&summary)?)?;
+    render_pivotal(&layout, &disc.prior_means(), pivotal, &graph).save_png(&dir.join("pivotal.png"))?;
+    curves(&history).render(900, 520).save_png(&dir.join("discovery_curves.png"))?;
+    if a.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        print_summary(&summary, &dir);
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// Has a planner process build the world graph over `V_p` (`--node-file`)
+/// and save it into the run directory, then loads it.
+fn build_graph_in_planner(a: &DiscoverArgs, w: &WorldArgs, dir: &Path, nodes: &Path) -> anyhow::Result<planner::WorldGraph> {
+    let run = format!("discover-graph-{}", std::process::id());
+    let _ = std::fs::remove_file(dir.join("graph.json"));
+    let mut words = vec!["planner".to_string(), "serve".into()];
+    words.extend(world_words(w));
+    words.extend(["--run".into(), run.clone(), "--run-dir".into(), dir.display().to_string()]);
+    words.extend(["--envs".into(), a.envs.to_string(), "--node-file".into(), nodes.display().to_string()]);
+    words.extend(["--duration".into(), "0.5".into()]);
+    let mut p = Pipeline::new(vec![(Role::Planner, words)], Some(dir))?;
+    p.spawn(Role::Planner)?;
+    let until = Instant::now() + Duration::from_secs(300);
+    while p.any_running() && Instant::now() < until {
+        p.poll_exited();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    p.stop_all(Duration::from_secs(3));
+    teardown(&run)?;
+    planner::WorldGraph::load(&dir.join("graph.json")).with_context(|| format!("the planner did not save a graph; see {}/planner.log", dir.display()))
+}
+
+/// The maze shaded by prior mean, with `V_p` and the graph's edges.
+fn render_pivotal(layout: &Layout, prior: &[f32], pivotal: &[u32], graph: &planner::WorldGraph) -> Canvas {
+    let px = 24usize;
+    let mut c = Canvas::new(layout.width * px, layout.height * px, [255, 255, 255]);
+    draw_grid(&mut c, &layout.cells, layout.width, 0, 0, px);
+    let free: Vec<usize> = (0..layout.cells.len()).filter(|&i| layout.cells[i] != Object::Wall as u8).collect();
+    let (lo, hi) = free.iter().map(|&i| prior[i]).fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    for &i in &free {
+        let t = if hi > lo { (prior[i] - lo) / (hi - lo) } else { 0.0 };
+        let (x, y) = ((i % layout.width * px) as i64, (i / layout.width * px) as i64);
+        c.fill_rect(x + 1, y + 1, px as i64 - 1, px as i64 - 1, [120, 40, 160], 0.75 * t);
+    }
+    let centre = |cell: u32| {
+        let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
+        ((x as f32 + 0.5) * px as f32, (y as f32 + 0.5) * px as f32)
+    };
+    for e in graph.edges() {
+        let (a, b) = (graph.nodes()[e.from.index()], graph.nodes()[e.to.index()]);
+        c.line(centre(a.0), centre(b.0), 2.0, [30, 30, 30], 0.55);
+    }
+    for &p in pivotal {
+        let (x, y) = centre(p);
+        c.fill_disc(x, y, px as f32 * 0.3, [255, 140, 0], 1.0);
+    }
+    c
+}
+
+fn curves(history: &[RoundStats]) -> LineChart {
+    let series = |name: &str, f: fn(&RoundStats) -> f64| Series {
+        name: name.into(),
+        points: history.iter().map(|h| (h.round as f64, f(h))).collect(),
+    };
+    LineChart {
+        title: "world graph discovery".into(),
+        x_label: "round".into(),
+        y_label: "fraction".into(),
+        series: vec![
+            series("reconstruction accuracy", |h| h.reconstruction_accuracy),
+            series("pi_g goal success", |h| h.gcp_success),
+            series("kept states", |h| h.kept_fraction),
+        ],
+        x_scale: XScale::Linear,
+    }
+}
+
+fn print_summary(s: &DiscoverySummary, dir: &Path) {
+    println!("world graph discovery: {} maze, seed {}, {} ({})", s.maze, s.seed, s.transport, dir.display());
+    println!("  {:<44} {:>12}", "figure", "value");
+    let rows: Vec<(&str, String)> = vec![
+        ("rounds", s.rounds.to_string()),
+        ("pivotal states |V_p|", s.pivotal_states.to_string()),
+        ("world graph edges", s.edges.to_string()),
+        ("connected node pairs", format!("{:.1}%", 100.0 * s.connected_pairs)),
+        ("doorway cells in V_p", format!("{:.1}%", 100.0 * s.doorway_fraction_of_pivotal)),
+        ("  chance (doorways among free cells)", format!("{:.1}%", 100.0 * s.doorway_fraction_of_cells)),
+        ("doorways found", format!("{:.1}%", 100.0 * s.doorways_found)),
+        ("reconstruction accuracy", format!("{:.3}", s.reconstruction_accuracy)),
+        ("pi_g success, goals within 10 steps", format!("{:.1}%", 100.0 * s.gcp_success_within_10)),
+        ("env steps", s.env_steps.to_string()),
+        ("wall time (s)", format!("{:.1}", s.wall_seconds)),
+        ("training throughput (env-steps/s)", format!("{:.0}", s.train_steps_per_sec)),
+    ];
+    for (k, v) in rows {
+        println!("  {k:<44} {v:>12}");
+    }
+    println!("  pictures: pivotal.png (prior mean, V_p, edges), graph.png, discovery_curves.png");
+}
