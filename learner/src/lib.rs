@@ -13,6 +13,7 @@
 
 pub mod actor_critic;
 pub mod batch_env;
+pub mod discovery;
 pub mod error;
 pub mod gae;
 pub mod gcp;
