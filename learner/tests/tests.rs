@@ -2,3 +2,5 @@
 
 // tch trains a tiny network: libtorch links, autograd and Adam work.
 mod tch_smoke;
+// The latent model ranks a four-room maze's doorways as pivotal states.
+mod pivotal_doorways;
