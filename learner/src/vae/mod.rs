@@ -222,6 +222,11 @@ impl LatentModel {
         &self.multipliers
     }
 
+    /// Restores multipliers saved with a checkpoint.
+    pub fn set_multipliers(&mut self, multipliers: Multipliers) {
+        self.multipliers = multipliers;
+    }
+
     /// The prior `Beta(α_t, β_t)` of every state of `batch` (`[L, B]` each).
     pub fn prior(&self, batch: &TrajectoryBatch) -> BetaPrior {
         self.prior.forward(&batch.cells, &batch.directions, &batch.carried)
@@ -378,6 +383,11 @@ impl LatentTrainer {
     /// The model being trained.
     pub fn model(&self) -> &LatentModel {
         &self.model
+    }
+
+    /// Mutable access to the model (e.g. to restore its multipliers).
+    pub fn model_mut(&mut self) -> &mut LatentModel {
+        &mut self.model
     }
 
     /// The variables, e.g. to save or load a checkpoint.
