@@ -4,3 +4,5 @@
 mod tch_smoke;
 // π_g learns to reach nearby goals; curiosity and trajectories are wired.
 mod gcp_learns;
+// The latent model ranks a four-room maze's doorways as pivotal states.
+mod pivotal_doorways;

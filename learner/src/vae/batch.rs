@@ -13,7 +13,7 @@ use crate::error::LearnerError;
 use super::config::LatentConfig;
 
 /// The agent's pose in a fixed maze: what the latent model reads as a state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
 pub struct AgentPose {
     /// Cell index `y·W + x`.
     pub cell: u32,

@@ -77,7 +77,7 @@ impl Default for LatentConfig {
             lstm_hidden: 64,
             prior_hidden: 64,
             target_kept: 2.0,
-            kl_budget: 4.0,
+            kl_budget: 1.0,
             l0_tolerance: 0.5,
             transition_tolerance: 1.0,
             lambda_init: 1e-3,

@@ -121,7 +121,7 @@ pub fn elbo_terms(
 /// average `c̄ ← d·c̄ + (1 − d)·c`, then `λ ← clamp(λ·exp(η·c̄), λ_min, λ_max)`.
 /// `λ` grows while the constraint is violated on average and shrinks once
 /// it holds, so it settles where the constraint is just met.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LagrangeMultiplier {
     /// Current value of `λ`.
     pub value: f64,
@@ -151,8 +151,9 @@ impl LagrangeMultiplier {
     }
 }
 
-/// `λ1` (KL), `λ2` (L0), `λ3` (transitions).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// `λ1` (KL), `λ2` (L0), `λ3` (transitions). Serialisable, so a checkpoint
+/// can keep them next to the network weights.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Multipliers {
     /// `λ1`, weight of the KL term.
     pub kl: LagrangeMultiplier,
