@@ -199,3 +199,30 @@ fn a_role_exits_cleanly_when_its_peer_dies_if_asked_to() {
     assert!(wait_exit(&mut sim2, Duration::from_secs(20)).success());
     assert!(wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()), "left behind: {:?}", shm_files(&run));
 }
+
+#[test]
+fn a_restarted_sim_is_a_new_stream_not_a_reordering() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = run_name("simrestart");
+    let d = dir.path().to_str().unwrap();
+    let common = ["--run", &run, "--run-dir", d, "--maze", "small", "--envs", "8", "--on-peer-death", "wait"];
+    let mut sim = role(dir.path(), "sim.log", &[&["sim", "serve"][..], &common].concat());
+    let mut learner = role(dir.path(), "learner.log", &[&["learner", "serve"][..], &common].concat());
+    assert!(wait_for(Duration::from_secs(30), || last_seq(dir.path()).is_some_and(|s| s > 2000)));
+    sim.kill().unwrap();
+    sim.wait().unwrap();
+    assert!(wait_for(Duration::from_secs(10), || std::fs::read_to_string(dir.path().join("learner.log"))
+        .is_ok_and(|l| l.contains("the sim is gone"))));
+    let mut sim2 = role(dir.path(), "sim2.log", &[&["sim", "serve"][..], &common].concat());
+    assert!(wait_for(Duration::from_secs(30), || std::fs::read_to_string(dir.path().join("learner.log"))
+        .is_ok_and(|l| l.contains("a sim rejoined"))));
+    std::thread::sleep(Duration::from_millis(500));
+    sigterm(&learner);
+    wait_exit(&mut learner, Duration::from_secs(20));
+    sigterm(&sim2);
+    wait_exit(&mut sim2, Duration::from_secs(20));
+    let report = read_json(dir.path(), "learner.report.json");
+    assert_eq!(report["stream"]["lost"], 0, "{report}");
+    assert_eq!(report["stream"]["reordered"], 0, "a restarted sim's batches are not stale: {report}");
+    assert_eq!(report["stream"]["sim_restarts"], 1, "{report}");
+}

@@ -139,7 +139,16 @@ impl<S: Service> ShmEnv<S> {
     pub fn wait_for_peer(&mut self, timeout: Duration) -> Result<(), EnvError> {
         self.current = None;
         self.node.cleanup_dead_nodes();
-        self.wait_next(None, timeout)
+        // A restarted simulator numbers its batches from 0 again: a new
+        // stream, not a reordering of the old one.
+        let before = self.tracker.clone();
+        self.tracker = SeqTracker::new();
+        self.wait_next(None, timeout)?;
+        let seq = self.observe().seq;
+        if before.expected().is_some_and(|next| seq < next) {
+            self.stats.sim_restarts += 1;
+        }
+        Ok(())
     }
 
     fn stopped(&self) -> bool {
