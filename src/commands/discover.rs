@@ -143,7 +143,6 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         eprintln!("discover: resuming {} after round {}", dir.display(), disc.rounds_done());
     }
 
-    let started = Instant::now();
     let (summary_transport, run_name) = if a.pipeline { ("pipeline", format!("discover-{}", std::process::id())) } else { ("in-process", String::new()) };
     let mut pipeline = None;
     let mut env: Box<dyn BatchEnvironment> = if a.pipeline {
@@ -239,7 +238,6 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         train_steps_per_sec: env_steps as f64 / loop_seconds.max(1e-9),
         pivotal_cells: cells,
     };
-    let _ = started;
     sim::render::write_atomic(&dir.join("discovery.json"), &serde_json::to_vec_pretty(&summary)?)?;
     render_pivotal(&layout, &disc.prior_means(), pivotal, &graph).save_png(&dir.join("pivotal.png"))?;
     curves(&history).render(900, 520).save_png(&dir.join("discovery_curves.png"))?;

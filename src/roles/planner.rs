@@ -201,7 +201,7 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 y: (req.from_cell as usize / layout.width) as u16,
                 dir: req.from_dir & 3,
             };
-            let status = match graph.route_from_pose_into(pose, NodeId(req.to_pivot), world, &mut route) {
+            match graph.route_from_pose_into(pose, NodeId(req.to_pivot), world, &mut route) {
                 Ok(_) => {
                     pivots.clear();
                     pivots.extend(route.nodes().iter().map(|n| n.0));
@@ -211,7 +211,6 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 }
                 Err(e) => call.respond(graph_version, status_of(&e), &[], &[], &[])?,
             };
-            let _ = status;
             lat.record("route_service", t0.elapsed().as_nanos() as u64);
             answered += 1;
             busy = true;
