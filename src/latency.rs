@@ -31,7 +31,10 @@ pub const PERCENTILES: [f64; 4] = [50.0, 90.0, 99.0, 99.9];
 impl Latencies {
     /// Empty histograms for process `role` (e.g. "sim").
     pub fn new(role: &str) -> Latencies {
-        Latencies { role: role.to_string(), hists: BTreeMap::new() }
+        Latencies {
+            role: role.to_string(),
+            hists: BTreeMap::new(),
+        }
     }
 
     /// Registers histogram `name` ahead of the hot loop, so recording never allocates.
@@ -106,10 +109,18 @@ impl Latencies {
             written.push(path);
             let points = h
                 .iter_quantiles(5)
-                .map(|v| (v.quantile_iterated_to() * 100.0, v.value_iterated_to() as f64 / 1e3))
+                .map(|v| {
+                    (
+                        v.quantile_iterated_to() * 100.0,
+                        v.value_iterated_to() as f64 / 1e3,
+                    )
+                })
                 .filter(|p| p.0 < 99.9999)
                 .collect();
-            series.push(Series { name: name.clone(), points });
+            series.push(Series {
+                name: name.clone(),
+                points,
+            });
         }
         if !series.is_empty() {
             let chart = LineChart {
@@ -134,17 +145,47 @@ fn new_hist() -> Histogram<u64> {
 /// HdrHistogram's percentile distribution text (values in µs).
 pub fn percentile_distribution(h: &Histogram<u64>) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "{:>12} {:>14} {:>10} {:>14}\n", "Value", "Percentile", "TotalCount", "1/(1-Percentile)");
+    let _ = writeln!(
+        s,
+        "{:>12} {:>14} {:>10} {:>14}\n",
+        "Value", "Percentile", "TotalCount", "1/(1-Percentile)"
+    );
     let mut total = 0u64;
     for v in h.iter_quantiles(5) {
         total += v.count_since_last_iteration();
         let q = v.quantile_iterated_to();
-        let inv = if q < 1.0 { format!("{:>14.2}", 1.0 / (1.0 - q)) } else { String::new() };
-        let _ = writeln!(s, "{:>12.3} {:>14.12} {:>10} {}", v.value_iterated_to() as f64 / 1e3, q, total, inv);
+        let inv = if q < 1.0 {
+            format!("{:>14.2}", 1.0 / (1.0 - q))
+        } else {
+            String::new()
+        };
+        let _ = writeln!(
+            s,
+            "{:>12.3} {:>14.12} {:>10} {}",
+            v.value_iterated_to() as f64 / 1e3,
+            q,
+            total,
+            inv
+        );
     }
-    let _ = writeln!(s, "#[Mean    = {:>12.3}, StdDeviation   = {:>12.3}]", h.mean() / 1e3, h.stdev() / 1e3);
-    let _ = writeln!(s, "#[Max     = {:>12.3}, Total count    = {:>12}]", h.max() as f64 / 1e3, h.len());
-    let _ = writeln!(s, "#[Buckets = {:>12}, SubBuckets     = {:>12}]", h.buckets(), h.distinct_values());
+    let _ = writeln!(
+        s,
+        "#[Mean    = {:>12.3}, StdDeviation   = {:>12.3}]",
+        h.mean() / 1e3,
+        h.stdev() / 1e3
+    );
+    let _ = writeln!(
+        s,
+        "#[Max     = {:>12.3}, Total count    = {:>12}]",
+        h.max() as f64 / 1e3,
+        h.len()
+    );
+    let _ = writeln!(
+        s,
+        "#[Buckets = {:>12}, SubBuckets     = {:>12}]",
+        h.buckets(),
+        h.distinct_values()
+    );
     s
 }
 
@@ -166,6 +207,9 @@ mod tests {
         let files = l.write_reports(dir.path()).unwrap();
         assert_eq!(files.len(), 2);
         let hgrm = std::fs::read_to_string(&files[0]).unwrap();
-        assert!(hgrm.contains("Percentile") && hgrm.contains("Total count    =         1000"), "{hgrm}");
+        assert!(
+            hgrm.contains("Percentile") && hgrm.contains("Total count    =         1000"),
+            "{hgrm}"
+        );
     }
 }

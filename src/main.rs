@@ -85,7 +85,10 @@ fn run() -> anyhow::Result<ExitCode> {
 /// OpenMP pool spinning against a busy core costs far more than it gains on
 /// these small models. `WORLDGRAPH_TORCH_THREADS` overrides it.
 fn set_torch_threads() {
-    let n = std::env::var("WORLDGRAPH_TORCH_THREADS").ok().and_then(|v| v.parse::<i32>().ok()).unwrap_or(1);
+    let n = std::env::var("WORLDGRAPH_TORCH_THREADS")
+        .ok()
+        .and_then(|v| v.parse::<i32>().ok())
+        .unwrap_or(1);
     tch::set_num_threads(n.max(1));
     tch::set_num_interop_threads(1);
 }
@@ -94,7 +97,8 @@ fn main() -> ExitCode {
     set_torch_threads();
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("WORLDGRAPH_LOG").unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_env("WORLDGRAPH_LOG")
+                .unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
         .init();

@@ -46,7 +46,12 @@ impl Role {
 
 /// The command-line words that reproduce `w`.
 pub fn world_words(w: &WorldArgs) -> Vec<String> {
-    let mut v = vec!["--task".into(), w.task.name().into(), "--seed".into(), w.seed.to_string()];
+    let mut v = vec![
+        "--task".into(),
+        w.task.name().into(),
+        "--seed".into(),
+        w.seed.to_string(),
+    ];
     match &w.layout {
         Some(p) => v.extend(["--layout".into(), p.display().to_string()]),
         None => v.extend(["--maze".into(), w.maze.name().into()]),
@@ -79,17 +84,33 @@ impl Pipeline {
     /// A pipeline of `roles` with their full argument lists (role words
     /// included); children log to `<log_dir>/<role>.log` when given, else
     /// inherit stderr.
-    pub fn new(roles: Vec<(Role, Vec<String>)>, log_dir: Option<&Path>) -> anyhow::Result<Pipeline> {
+    pub fn new(
+        roles: Vec<(Role, Vec<String>)>,
+        log_dir: Option<&Path>,
+    ) -> anyhow::Result<Pipeline> {
         let exe = std::env::current_exe().context("cannot find the worldgraph executable")?;
         let slots = roles
             .into_iter()
-            .map(|(role, args)| Slot { role, args, child: None, started: Instant::now(), spawned: 0 })
+            .map(|(role, args)| Slot {
+                role,
+                args,
+                child: None,
+                started: Instant::now(),
+                spawned: 0,
+            })
             .collect();
-        Ok(Pipeline { exe, log_dir: log_dir.map(Path::to_path_buf), slots })
+        Ok(Pipeline {
+            exe,
+            log_dir: log_dir.map(Path::to_path_buf),
+            slots,
+        })
     }
 
     fn slot(&mut self, role: Role) -> &mut Slot {
-        self.slots.iter_mut().find(|s| s.role == role).expect("invariant: every started role has a slot")
+        self.slots
+            .iter_mut()
+            .find(|s| s.role == role)
+            .expect("invariant: every started role has a slot")
     }
 
     /// Starts (or restarts) `role`.
@@ -98,7 +119,9 @@ impl Pipeline {
         let log_dir = self.log_dir.clone();
         let slot = self.slot(role);
         let mut cmd = Command::new(&exe);
-        cmd.args(&slot.args).stdin(Stdio::null()).stdout(Stdio::null());
+        cmd.args(&slot.args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
         if let Some(dir) = &log_dir {
             let log = std::fs::OpenOptions::new()
                 .create(true)
@@ -106,7 +129,9 @@ impl Pipeline {
                 .open(dir.join(format!("{}.log", role.name())))?;
             cmd.stderr(log);
         }
-        let child = cmd.spawn().with_context(|| format!("cannot start the {} process", role.name()))?;
+        let child = cmd
+            .spawn()
+            .with_context(|| format!("cannot start the {} process", role.name()))?;
         slot.spawned += 1;
         slot.child = Some(child);
         slot.started = Instant::now();
@@ -138,12 +163,20 @@ impl Pipeline {
 
     /// Process id of `role`, if running.
     pub fn pid(&self, role: Role) -> Option<u32> {
-        self.slots.iter().find(|s| s.role == role)?.child.as_ref().map(Child::id)
+        self.slots
+            .iter()
+            .find(|s| s.role == role)?
+            .child
+            .as_ref()
+            .map(Child::id)
     }
 
     /// Restarts so far of `role`.
     pub fn restarts(&self, role: Role) -> u32 {
-        self.slots.iter().find(|s| s.role == role).map_or(0, |s| s.spawned.saturating_sub(1))
+        self.slots
+            .iter()
+            .find(|s| s.role == role)
+            .map_or(0, |s| s.spawned.saturating_sub(1))
     }
 
     /// Whether any role is still running.

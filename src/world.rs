@@ -41,7 +41,10 @@ impl WorldArgs {
     /// The validated layout and environment configuration.
     pub fn build(&self) -> anyhow::Result<(Layout, EnvConfig)> {
         let (layout, from_file) = match &self.layout {
-            Some(path) => (Layout::from_file(path).with_context(|| "cannot use the layout")?, true),
+            Some(path) => (
+                Layout::from_file(path).with_context(|| "cannot use the layout")?,
+                true,
+            ),
             None => (self.maze.layout(self.task.uses_door_key_layout()), false),
         };
         let mut cfg = EnvConfig::for_task(self.task, &layout);

@@ -5,7 +5,10 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn worldgraph(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_worldgraph")).args(args).output().expect("run worldgraph")
+    Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(args)
+        .output()
+        .expect("run worldgraph")
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> String {
@@ -15,8 +18,15 @@ fn write(dir: &Path, name: &str, text: &str) -> String {
 }
 
 fn json_lines(out: &Output) -> Vec<serde_json::Value> {
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).expect("JSON line")).collect()
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("JSON line"))
+        .collect()
 }
 
 #[test]
@@ -25,15 +35,33 @@ fn trace_reports_positions_doors_and_rewards_of_a_door_key_layout() {
     let layout = write(dir.path(), "dk.txt", "########\n#K<D..E#\n########\n");
     // Turn to the key, pick it up, turn back, unlock, walk to the exit.
     let out = worldgraph(&[
-        "sim", "trace", "--layout", &layout, "--task", "doorkey", "--json",
-        "--actions", "2,pickup,1,1,5,2,2,2,2",
+        "sim",
+        "trace",
+        "--layout",
+        &layout,
+        "--task",
+        "doorkey",
+        "--json",
+        "--actions",
+        "2,pickup,1,1,5,2,2,2,2",
     ]);
     let steps = json_lines(&out);
-    assert_eq!(steps.len(), 10, "the initial state plus one object per action");
+    assert_eq!(
+        steps.len(),
+        10,
+        "the initial state plus one object per action"
+    );
     assert_eq!(steps[0]["pos"], serde_json::json!([2, 1]));
     assert_eq!(steps[0]["dir"], 2);
-    assert_eq!(steps[0]["doors"], serde_json::json!([{ "pos": [3, 1], "state": "locked" }]));
-    assert_eq!(steps[1]["pos"], serde_json::json!([2, 1]), "the key blocks the way");
+    assert_eq!(
+        steps[0]["doors"],
+        serde_json::json!([{ "pos": [3, 1], "state": "locked" }])
+    );
+    assert_eq!(
+        steps[1]["pos"],
+        serde_json::json!([2, 1]),
+        "the key blocks the way"
+    );
     assert_eq!(steps[2]["carrying"], "key");
     assert_eq!(steps[5]["doors"][0]["state"], "open");
     assert!((steps[5]["reward"].as_f64().unwrap() - 0.99).abs() < 1e-6);
@@ -42,14 +70,28 @@ fn trace_reports_positions_doors_and_rewards_of_a_door_key_layout() {
     assert_eq!(last["terminated"], true);
     assert_eq!(last["truncated"], false);
     assert!(steps[..9].iter().all(|s| s["terminated"] == false));
-    assert!(steps[1..].iter().all(|s| s["t"].as_u64().is_some() && s["reward"].is_number()));
+    assert!(
+        steps[1..]
+            .iter()
+            .all(|s| s["t"].as_u64().is_some() && s["reward"].is_number())
+    );
 }
 
 #[test]
 fn trace_of_a_layout_file_spawns_no_random_balls_and_is_reproducible() {
     let dir = tempfile::tempdir().unwrap();
     let layout = write(dir.path(), "mg.txt", "#######\n#>.B.E#\n#######\n");
-    let args = ["sim", "trace", "--layout", &layout, "--json", "--actions", "2,2,2,2", "--seed", "9"];
+    let args = [
+        "sim",
+        "trace",
+        "--layout",
+        &layout,
+        "--json",
+        "--actions",
+        "2,2,2,2",
+        "--seed",
+        "9",
+    ];
     let a = json_lines(&worldgraph(&args));
     assert_eq!(a[2]["balls"], 1, "the file's ball is collected");
     assert!((a[2]["reward"].as_f64().unwrap() - 0.99).abs() < 1e-6);
@@ -61,8 +103,19 @@ fn trace_of_a_layout_file_spawns_no_random_balls_and_is_reproducible() {
 #[test]
 fn embedded_maze_traces_depend_on_the_seed_only() {
     let run = |seed: &str| {
-        let out = worldgraph(&["sim", "trace", "--maze", "small", "--task", "multigoal-stochastic", "--seed", seed,
-            "--json", "--actions", "2,2,1,2,2,2,0,2,2,2,2"]);
+        let out = worldgraph(&[
+            "sim",
+            "trace",
+            "--maze",
+            "small",
+            "--task",
+            "multigoal-stochastic",
+            "--seed",
+            seed,
+            "--json",
+            "--actions",
+            "2,2,1,2,2,2,0,2,2,2,2",
+        ]);
         json_lines(&out)
     };
     assert_eq!(run("4"), run("4"));
@@ -77,7 +130,11 @@ fn malformed_layouts_are_refused_with_line_and_column() {
         ("two-agents", "######\n#>.<E#\n######\n", "line 2, column 4"),
         ("no-exit", "#####\n#>..#\n#####\n", "no exit"),
         ("open", "#####\n#>..E\n#####\n", "line 2, column 5"),
-        ("unreachable", "######\n#>#.E#\n######\n", "cannot be reached"),
+        (
+            "unreachable",
+            "######\n#>#.E#\n######\n",
+            "cannot be reached",
+        ),
     ];
     for (name, text, needle) in cases {
         let path = write(dir.path(), &format!("{name}.txt"), text);
@@ -86,7 +143,14 @@ fn malformed_layouts_are_refused_with_line_and_column() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(needle), "{name}: {err}");
     }
-    let out = worldgraph(&["sim", "trace", "--layout", "/nonexistent/x.txt", "--actions", "2"]);
+    let out = worldgraph(&[
+        "sim",
+        "trace",
+        "--layout",
+        "/nonexistent/x.txt",
+        "--actions",
+        "2",
+    ]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/x.txt"));
 }
 
@@ -94,7 +158,16 @@ fn malformed_layouts_are_refused_with_line_and_column() {
 fn render_writes_a_png_of_one_env_and_of_a_batch() {
     let dir = tempfile::tempdir().unwrap();
     let one = dir.path().join("one.png");
-    let out = worldgraph(&["sim", "render", "--maze", "small", "--png", one.to_str().unwrap(), "--cell-px", "10"]);
+    let out = worldgraph(&[
+        "sim",
+        "render",
+        "--maze",
+        "small",
+        "--png",
+        one.to_str().unwrap(),
+        "--cell-px",
+        "10",
+    ]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.starts_with("#############\n#.....#"), "{text}");
@@ -103,15 +176,45 @@ fn render_writes_a_png_of_one_env_and_of_a_batch() {
     // IHDR: width and height of 13x13 cells of 10 px.
     assert_eq!(u32::from_be_bytes(bytes[16..20].try_into().unwrap()), 130);
     let grid = dir.path().join("grid.png");
-    assert!(worldgraph(&["sim", "render", "--maze", "large", "--batch", "4", "--png", grid.to_str().unwrap()]).status.success());
+    assert!(
+        worldgraph(&[
+            "sim",
+            "render",
+            "--maze",
+            "large",
+            "--batch",
+            "4",
+            "--png",
+            grid.to_str().unwrap()
+        ])
+        .status
+        .success()
+    );
     assert!(std::fs::metadata(&grid).unwrap().len() > 1000);
 }
 
 #[test]
 fn bench_sim_json_has_the_documented_fields() {
-    let out = worldgraph(&["bench", "sim", "--maze", "small", "--envs", "64", "--threads", "2", "--seconds", "0.2", "--json"]);
+    let out = worldgraph(&[
+        "bench",
+        "sim",
+        "--maze",
+        "small",
+        "--envs",
+        "64",
+        "--threads",
+        "2",
+        "--seconds",
+        "0.2",
+        "--json",
+    ]);
     let r = &json_lines(&out)[0];
-    for k in ["steps_per_sec", "obs_bytes_per_step", "memcpy_bytes_per_sec", "ratio_to_memcpy_bound"] {
+    for k in [
+        "steps_per_sec",
+        "obs_bytes_per_step",
+        "memcpy_bytes_per_sec",
+        "ratio_to_memcpy_bound",
+    ] {
         assert!(r[k].as_f64().is_some_and(|v| v > 0.0), "{k} in {r}");
     }
     assert_eq!(r["obs_bytes_per_step"], 13 * 13 + 20);

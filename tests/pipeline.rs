@@ -22,7 +22,12 @@ fn run_name(test: &str) -> String {
 fn shm_files(run: &str) -> Vec<String> {
     let prefix = format!("wg_{run}_");
     std::fs::read_dir("/dev/shm")
-        .map(|d| d.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| n.starts_with(&prefix)).collect())
+        .map(|d| {
+            d.flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.starts_with(&prefix))
+                .collect()
+        })
         .unwrap_or_default()
 }
 
@@ -34,7 +39,13 @@ fn read_json(dir: &Path, name: &str) -> serde_json::Value {
 /// Starts one role; its stderr goes to `<dir>/<log>`.
 fn role(dir: &Path, log: &str, args: &[&str]) -> Child {
     let f = std::fs::File::create(dir.join(log)).unwrap();
-    Command::new(exe()).args(args).stdin(Stdio::null()).stdout(Stdio::null()).stderr(f).spawn().expect("spawn role")
+    Command::new(exe())
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(f)
+        .spawn()
+        .expect("spawn role")
 }
 
 /// Polls `cond` every 50 ms until it holds or `limit` passes.
@@ -56,7 +67,9 @@ fn last_seq(dir: &Path) -> Option<u64> {
 }
 
 fn sigterm(child: &Child) {
-    let _ = Command::new("kill").args(["-TERM", &child.id().to_string()]).status();
+    let _ = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status();
 }
 
 fn wait_exit(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
@@ -78,12 +91,34 @@ fn the_three_roles_exchange_data_through_shared_memory() {
     let dir = tempfile::tempdir().unwrap();
     let run = run_name("exchange");
     let out = Command::new(exe())
-        .args(["run", "--run", &run, "--run-dir", dir.path().to_str().unwrap(), "--duration", "3"])
-        .args(["--maze", "small", "--envs", "16", "--route-every", "20", "--nodes", "8", "--logs-to-files"])
+        .args([
+            "run",
+            "--run",
+            &run,
+            "--run-dir",
+            dir.path().to_str().unwrap(),
+            "--duration",
+            "3",
+        ])
+        .args([
+            "--maze",
+            "small",
+            "--envs",
+            "16",
+            "--route-every",
+            "20",
+            "--nodes",
+            "8",
+            "--logs-to-files",
+        ])
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "run failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "run failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let sim = read_json(dir.path(), "sim.report.json");
     let learner = read_json(dir.path(), "learner.report.json");
     let planner = read_json(dir.path(), "planner.report.json");
@@ -91,20 +126,50 @@ fn the_three_roles_exchange_data_through_shared_memory() {
     assert!(batches > 100, "the sim published {batches} batches");
     // Lock-step: the learner answered every batch but possibly the last one.
     let answered = learner["batches"].as_u64().unwrap();
-    assert!(answered + 1 >= batches - 1 && answered <= batches, "{answered} answers to {batches} batches");
+    assert!(
+        answered + 1 >= batches - 1 && answered <= batches,
+        "{answered} answers to {batches} batches"
+    );
     assert_eq!(learner["stream"]["lost"], 0);
     assert_eq!(learner["stream"]["reordered"], 0);
-    assert!(learner["episodes"].as_u64().unwrap() > 0, "episodes ended and were reported");
-    assert!(planner["batches_read"].as_u64().unwrap() > 0, "the planner read the same stream");
-    assert!(planner["cells_visited"].as_u64().unwrap() > 10, "coverage counted");
-    assert!(learner["routes_ok"].as_u64().unwrap() > 0, "routes came back: {learner}");
+    assert!(
+        learner["episodes"].as_u64().unwrap() > 0,
+        "episodes ended and were reported"
+    );
+    assert!(
+        planner["batches_read"].as_u64().unwrap() > 0,
+        "the planner read the same stream"
+    );
+    assert!(
+        planner["cells_visited"].as_u64().unwrap() > 10,
+        "coverage counted"
+    );
+    assert!(
+        learner["routes_ok"].as_u64().unwrap() > 0,
+        "routes came back: {learner}"
+    );
     assert_eq!(planner["nodes"], 8);
-    for f in ["graph.json", "graph.png", "coverage.png", "sim.latency.png", "sim.action_round_trip.hgrm",
-              "learner.policy.hgrm", "learner.obs_one_way.hgrm", "planner.route_service.hgrm"] {
+    for f in [
+        "graph.json",
+        "graph.png",
+        "coverage.png",
+        "sim.latency.png",
+        "sim.action_round_trip.hgrm",
+        "learner.policy.hgrm",
+        "learner.obs_one_way.hgrm",
+        "planner.route_service.hgrm",
+    ] {
         assert!(dir.path().join(f).exists(), "{f} written");
     }
-    assert!(stdout.contains("shared-memory files left behind"), "{stdout}");
-    assert!(shm_files(&run).is_empty(), "left behind: {:?}", shm_files(&run));
+    assert!(
+        stdout.contains("shared-memory files left behind"),
+        "{stdout}"
+    );
+    assert!(
+        shm_files(&run).is_empty(),
+        "left behind: {:?}",
+        shm_files(&run)
+    );
 }
 
 #[test]
@@ -112,21 +177,63 @@ fn a_learner_with_another_grid_shape_is_refused_with_a_message_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let run = run_name("shape");
     let d = dir.path().to_str().unwrap();
-    let mut sim = role(dir.path(), "sim.log", &["sim", "serve", "--run", &run, "--run-dir", d, "--maze", "small", "--envs", "16"]);
-    assert!(wait_for(Duration::from_secs(20), || last_seq(dir.path()).is_some() || dir.path().join("sim.log").metadata().is_ok_and(|m| m.len() > 0)));
+    let mut sim = role(
+        dir.path(),
+        "sim.log",
+        &[
+            "sim",
+            "serve",
+            "--run",
+            &run,
+            "--run-dir",
+            d,
+            "--maze",
+            "small",
+            "--envs",
+            "16",
+        ],
+    );
+    assert!(wait_for(Duration::from_secs(20), || last_seq(dir.path())
+        .is_some()
+        || dir
+            .path()
+            .join("sim.log")
+            .metadata()
+            .is_ok_and(|m| m.len() > 0)));
     for (maze, envs, needle) in [("medium", "16", "25x19"), ("small", "32", "32")] {
         let out = Command::new(exe())
-            .args(["learner", "serve", "--run", &run, "--run-dir", d, "--maze", maze, "--envs", envs])
+            .args([
+                "learner",
+                "serve",
+                "--run",
+                &run,
+                "--run-dir",
+                d,
+                "--maze",
+                maze,
+                "--envs",
+                envs,
+            ])
             .stdin(Stdio::null())
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "a {maze}/{envs} learner was accepted: {err}");
-        assert!(err.contains(needle) && (err.contains("13x13") || err.contains("16")), "{maze}/{envs}: {err}");
+        assert!(
+            !out.status.success(),
+            "a {maze}/{envs} learner was accepted: {err}"
+        );
+        assert!(
+            err.contains(needle) && (err.contains("13x13") || err.contains("16")),
+            "{maze}/{envs}: {err}"
+        );
     }
     sigterm(&sim);
     assert!(wait_exit(&mut sim, Duration::from_secs(20)).success());
-    assert!(wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()), "left behind: {:?}", shm_files(&run));
+    assert!(
+        wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()),
+        "left behind: {:?}",
+        shm_files(&run)
+    );
 }
 
 #[test]
@@ -134,30 +241,63 @@ fn a_killed_learner_is_noticed_and_a_restarted_one_rejoins_without_losing_batche
     let dir = tempfile::tempdir().unwrap();
     let run = run_name("rejoin");
     let d = dir.path().to_str().unwrap();
-    let common = ["--run", &run, "--run-dir", d, "--maze", "small", "--envs", "8", "--on-peer-death", "wait"];
-    let mut sim = role(dir.path(), "sim.log", &[&["sim", "serve"][..], &common].concat());
-    let mut learner = role(dir.path(), "learner1.log", &[&["learner", "serve"][..], &common].concat());
-    assert!(wait_for(Duration::from_secs(30), || last_seq(dir.path()).is_some_and(|s| s > 1000)), "the pipeline runs");
+    let common = [
+        "--run",
+        &run,
+        "--run-dir",
+        d,
+        "--maze",
+        "small",
+        "--envs",
+        "8",
+        "--on-peer-death",
+        "wait",
+    ];
+    let mut sim = role(
+        dir.path(),
+        "sim.log",
+        &[&["sim", "serve"][..], &common].concat(),
+    );
+    let mut learner = role(
+        dir.path(),
+        "learner1.log",
+        &[&["learner", "serve"][..], &common].concat(),
+    );
+    assert!(
+        wait_for(Duration::from_secs(30), || last_seq(dir.path())
+            .is_some_and(|s| s > 1000)),
+        "the pipeline runs"
+    );
     learner.kill().unwrap();
     learner.wait().unwrap();
     let killed = Instant::now();
     let noticed = wait_for(Duration::from_secs(10), || {
-        std::fs::read_to_string(dir.path().join("sim.log")).is_ok_and(|l| l.contains("the learner is gone"))
+        std::fs::read_to_string(dir.path().join("sim.log"))
+            .is_ok_and(|l| l.contains("the learner is gone"))
     });
     assert!(noticed, "the sim did not say the learner died");
     let after = killed.elapsed();
     eprintln!("sim noticed the dead learner after {after:?}");
     let seq_at_restart = last_seq(dir.path()).unwrap();
     // On request (SIGUSR1) the waiting sim prints its latency table.
-    let _ = Command::new("kill").args(["-USR1", &sim.id().to_string()]).status();
+    let _ = Command::new("kill")
+        .args(["-USR1", &sim.id().to_string()])
+        .status();
     assert!(
-        wait_for(Duration::from_secs(10), || std::fs::read_to_string(dir.path().join("sim.log"))
-            .is_ok_and(|l| l.contains("sim latency (µs)"))),
+        wait_for(Duration::from_secs(10), || std::fs::read_to_string(
+            dir.path().join("sim.log")
+        )
+        .is_ok_and(|l| l.contains("sim latency (µs)"))),
         "SIGUSR1 printed the percentile table"
     );
-    let mut learner2 = role(dir.path(), "learner2.log", &[&["learner", "serve"][..], &common].concat());
+    let mut learner2 = role(
+        dir.path(),
+        "learner2.log",
+        &[&["learner", "serve"][..], &common].concat(),
+    );
     assert!(
-        wait_for(Duration::from_secs(30), || last_seq(dir.path()).is_some_and(|s| s > seq_at_restart + 1000)),
+        wait_for(Duration::from_secs(30), || last_seq(dir.path())
+            .is_some_and(|s| s > seq_at_restart + 1000)),
         "batches flow again after the restart"
     );
     sigterm(&learner2);
@@ -167,10 +307,21 @@ fn a_killed_learner_is_noticed_and_a_restarted_one_rejoins_without_losing_batche
     let sim_report = read_json(dir.path(), "sim.report.json");
     assert_eq!(sim_report["learner_deaths"], 1);
     let l2 = read_json(dir.path(), "learner.report.json");
-    assert_eq!(l2["stream"]["lost"], 0, "the rejoined learner lost nothing: {l2}");
+    assert_eq!(
+        l2["stream"]["lost"], 0,
+        "the rejoined learner lost nothing: {l2}"
+    );
     assert_eq!(l2["stream"]["reordered"], 0);
-    assert!(std::fs::read_to_string(dir.path().join("sim.log")).unwrap().contains("a learner rejoined"));
-    assert!(wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()), "left behind: {:?}", shm_files(&run));
+    assert!(
+        std::fs::read_to_string(dir.path().join("sim.log"))
+            .unwrap()
+            .contains("a learner rejoined")
+    );
+    assert!(
+        wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()),
+        "left behind: {:?}",
+        shm_files(&run)
+    );
 }
 
 #[test]
@@ -178,26 +329,71 @@ fn a_role_exits_cleanly_when_its_peer_dies_if_asked_to() {
     let dir = tempfile::tempdir().unwrap();
     let run = run_name("exit");
     let d = dir.path().to_str().unwrap();
-    let common = ["--run", &run, "--run-dir", d, "--maze", "small", "--envs", "8", "--on-peer-death", "exit"];
-    let mut sim = role(dir.path(), "sim.log", &[&["sim", "serve"][..], &common].concat());
-    let mut learner = role(dir.path(), "learner.log", &[&["learner", "serve"][..], &common].concat());
-    assert!(wait_for(Duration::from_secs(30), || last_seq(dir.path()).is_some_and(|s| s > 100)));
+    let common = [
+        "--run",
+        &run,
+        "--run-dir",
+        d,
+        "--maze",
+        "small",
+        "--envs",
+        "8",
+        "--on-peer-death",
+        "exit",
+    ];
+    let mut sim = role(
+        dir.path(),
+        "sim.log",
+        &[&["sim", "serve"][..], &common].concat(),
+    );
+    let mut learner = role(
+        dir.path(),
+        "learner.log",
+        &[&["learner", "serve"][..], &common].concat(),
+    );
+    assert!(wait_for(Duration::from_secs(30), || last_seq(dir.path())
+        .is_some_and(|s| s > 100)));
     sim.kill().unwrap();
     sim.wait().unwrap();
     let st = wait_exit(&mut learner, Duration::from_secs(10));
-    assert_eq!(st.code(), Some(3), "the learner exits with the peer-died status");
+    assert_eq!(
+        st.code(),
+        Some(3),
+        "the learner exits with the peer-died status"
+    );
     let report = read_json(dir.path(), "learner.report.json");
     assert_eq!(report["stopped_by"], "sim died");
     // The killed sim left its resources; the next start of the run cleans them up.
-    let mut sim2 = role(dir.path(), "sim2.log", &["sim", "serve", "--run", &run, "--run-dir", d, "--maze", "small", "--envs", "8"]);
+    let mut sim2 = role(
+        dir.path(),
+        "sim2.log",
+        &[
+            "sim",
+            "serve",
+            "--run",
+            &run,
+            "--run-dir",
+            d,
+            "--maze",
+            "small",
+            "--envs",
+            "8",
+        ],
+    );
     assert!(
-        wait_for(Duration::from_secs(20), || std::fs::read_to_string(dir.path().join("sim2.log"))
-            .is_ok_and(|l| l.contains("publishing"))),
+        wait_for(Duration::from_secs(20), || std::fs::read_to_string(
+            dir.path().join("sim2.log")
+        )
+        .is_ok_and(|l| l.contains("publishing"))),
         "the second sim starts over the killed one's leftovers"
     );
     sigterm(&sim2);
     assert!(wait_exit(&mut sim2, Duration::from_secs(20)).success());
-    assert!(wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()), "left behind: {:?}", shm_files(&run));
+    assert!(
+        wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()),
+        "left behind: {:?}",
+        shm_files(&run)
+    );
 }
 
 #[test]
@@ -205,17 +401,45 @@ fn a_restarted_sim_is_a_new_stream_not_a_reordering() {
     let dir = tempfile::tempdir().unwrap();
     let run = run_name("simrestart");
     let d = dir.path().to_str().unwrap();
-    let common = ["--run", &run, "--run-dir", d, "--maze", "small", "--envs", "8", "--on-peer-death", "wait"];
-    let mut sim = role(dir.path(), "sim.log", &[&["sim", "serve"][..], &common].concat());
-    let mut learner = role(dir.path(), "learner.log", &[&["learner", "serve"][..], &common].concat());
-    assert!(wait_for(Duration::from_secs(30), || last_seq(dir.path()).is_some_and(|s| s > 2000)));
+    let common = [
+        "--run",
+        &run,
+        "--run-dir",
+        d,
+        "--maze",
+        "small",
+        "--envs",
+        "8",
+        "--on-peer-death",
+        "wait",
+    ];
+    let mut sim = role(
+        dir.path(),
+        "sim.log",
+        &[&["sim", "serve"][..], &common].concat(),
+    );
+    let mut learner = role(
+        dir.path(),
+        "learner.log",
+        &[&["learner", "serve"][..], &common].concat(),
+    );
+    assert!(wait_for(Duration::from_secs(30), || last_seq(dir.path())
+        .is_some_and(|s| s > 2000)));
     sim.kill().unwrap();
     sim.wait().unwrap();
-    assert!(wait_for(Duration::from_secs(10), || std::fs::read_to_string(dir.path().join("learner.log"))
-        .is_ok_and(|l| l.contains("the sim is gone"))));
-    let mut sim2 = role(dir.path(), "sim2.log", &[&["sim", "serve"][..], &common].concat());
-    assert!(wait_for(Duration::from_secs(30), || std::fs::read_to_string(dir.path().join("learner.log"))
-        .is_ok_and(|l| l.contains("a sim rejoined"))));
+    assert!(wait_for(Duration::from_secs(10), || {
+        std::fs::read_to_string(dir.path().join("learner.log"))
+            .is_ok_and(|l| l.contains("the sim is gone"))
+    }));
+    let mut sim2 = role(
+        dir.path(),
+        "sim2.log",
+        &[&["sim", "serve"][..], &common].concat(),
+    );
+    assert!(wait_for(Duration::from_secs(30), || {
+        std::fs::read_to_string(dir.path().join("learner.log"))
+            .is_ok_and(|l| l.contains("a sim rejoined"))
+    }));
     std::thread::sleep(Duration::from_millis(500));
     sigterm(&learner);
     wait_exit(&mut learner, Duration::from_secs(20));
@@ -223,6 +447,9 @@ fn a_restarted_sim_is_a_new_stream_not_a_reordering() {
     wait_exit(&mut sim2, Duration::from_secs(20));
     let report = read_json(dir.path(), "learner.report.json");
     assert_eq!(report["stream"]["lost"], 0, "{report}");
-    assert_eq!(report["stream"]["reordered"], 0, "a restarted sim's batches are not stale: {report}");
+    assert_eq!(
+        report["stream"]["reordered"], 0,
+        "a restarted sim's batches are not stale: {report}"
+    );
     assert_eq!(report["stream"]["sim_restarts"], 1, "{report}");
 }

@@ -35,7 +35,12 @@ pub struct ActorCriticConfig {
 
 impl Default for ActorCriticConfig {
     fn default() -> Self {
-        ActorCriticConfig { conv_channels: [16, 32], hidden: 128, num_actions: 3, goal_channel: false }
+        ActorCriticConfig {
+            conv_channels: [16, 32],
+            hidden: 128,
+            num_actions: 3,
+            goal_channel: false,
+        }
     }
 }
 
@@ -98,13 +103,23 @@ impl LstmState {
     /// Zeroes the state of environments whose episode just ended
     /// (`done[i] = 1`): CleanRL's `(1 - done)` trick, written once.
     pub fn reset_done(&self, done: &Tensor) -> LstmState {
-        let keep: Tensor = done.to_kind(Kind::Float).neg().g_add_scalar(1.0).unsqueeze(1);
-        LstmState { h: &self.h * &keep, c: &self.c * &keep }
+        let keep: Tensor = done
+            .to_kind(Kind::Float)
+            .neg()
+            .g_add_scalar(1.0)
+            .unsqueeze(1);
+        LstmState {
+            h: &self.h * &keep,
+            c: &self.c * &keep,
+        }
     }
 
     /// A copy detached from the autograd graph (truncated BPTT).
     pub fn detach(&self) -> LstmState {
-        LstmState { h: self.h.detach(), c: self.c.detach() }
+        LstmState {
+            h: self.h.detach(),
+            c: self.c.detach(),
+        }
     }
 }
 
@@ -135,21 +150,47 @@ impl ActorCritic {
     /// Builds the network under `p` for grids of `width × height`.
     pub fn new(p: &nn::Path, cfg: &ActorCriticConfig, width: usize, height: usize) -> ActorCritic {
         let [c1, c2] = cfg.conv_channels;
-        let conv = |stride| nn::ConvConfig { stride, padding: 1, ..Default::default() };
+        let conv = |stride| nn::ConvConfig {
+            stride,
+            padding: 1,
+            ..Default::default()
+        };
         let (h2, w2) = ((height as i64 + 1) / 2, (width as i64 + 1) / 2);
         let enc = p / "encoder";
         let encoder = nn::seq()
-            .add(nn::conv2d(&enc / "conv1", cfg.in_channels(), c1, 3, conv(1)))
+            .add(nn::conv2d(
+                &enc / "conv1",
+                cfg.in_channels(),
+                c1,
+                3,
+                conv(1),
+            ))
             .add_fn(|x| x.relu())
             .add(nn::conv2d(&enc / "conv2", c1, c2, 3, conv(2)))
             .add_fn(|x| x.relu())
             .add_fn(|x| x.flatten(1, -1))
-            .add(nn::linear(&enc / "fc", c2 * h2 * w2, cfg.hidden, Default::default()))
+            .add(nn::linear(
+                &enc / "fc",
+                c2 * h2 * w2,
+                cfg.hidden,
+                Default::default(),
+            ))
             .add_fn(|x| x.relu());
         let core = nn::lstm(p / "core", cfg.hidden, cfg.hidden, Default::default());
-        let policy = nn::linear(p / "policy", cfg.hidden, cfg.num_actions, Default::default());
+        let policy = nn::linear(
+            p / "policy",
+            cfg.hidden,
+            cfg.num_actions,
+            Default::default(),
+        );
         let value = nn::linear(p / "value", cfg.hidden, 1, Default::default());
-        ActorCritic { encoder, core, policy, value, cfg: cfg.clone() }
+        ActorCritic {
+            encoder,
+            core,
+            policy,
+            value,
+            cfg: cfg.clone(),
+        }
     }
 
     /// The configuration.

@@ -96,7 +96,13 @@ pub struct InProcess {
 
 impl InProcess {
     /// `n` environments seeded from `(seed, 0..n)` on `threads` threads, reset.
-    pub fn new(layout: Layout, cfg: EnvConfig, n: usize, seed: u64, threads: usize) -> Result<InProcess, EnvError> {
+    pub fn new(
+        layout: Layout,
+        cfg: EnvConfig,
+        n: usize,
+        seed: u64,
+        threads: usize,
+    ) -> Result<InProcess, EnvError> {
         let mut batch = BatchEnv::new(layout, cfg, n, seed, threads)?;
         let mut buf = batch.buffers();
         batch.reset(buf.out());
@@ -118,11 +124,20 @@ impl BatchEnvironment for InProcess {
     }
     fn observe(&self) -> ObsView<'_> {
         let l = self.batch.layout();
-        ObsView { seq: self.seq, cells: &self.buf.cells, meta: &self.buf.meta, width: l.width, height: l.height }
+        ObsView {
+            seq: self.seq,
+            cells: &self.buf.cells,
+            meta: &self.buf.meta,
+            width: l.width,
+            height: l.height,
+        }
     }
     fn step(&mut self, actions: &[u8]) -> Result<(), EnvError> {
         if actions.len() != self.batch.len() {
-            return Err(EnvError::ActionCount { expected: self.batch.len(), got: actions.len() });
+            return Err(EnvError::ActionCount {
+                expected: self.batch.len(),
+                got: actions.len(),
+            });
         }
         self.batch.step(actions, self.buf.out());
         self.seq += 1;

@@ -95,12 +95,17 @@ impl Default for DiscoveryConfig {
 impl DiscoveryConfig {
     /// Checks the values once, before anything is built.
     pub fn validate(&self) -> Result<(), LearnerError> {
-        let bad = |field: &'static str, reason: &str| Err(LearnerError::Config(crate::ConfigError::new(field, reason)));
+        let bad = |field: &'static str, reason: &str| {
+            Err(LearnerError::Config(crate::ConfigError::new(field, reason)))
+        };
         if self.max_rounds == 0 {
             return bad("max_rounds", "must be at least 1");
         }
         if self.walk_len == 0 || self.walk_steps_per_round < self.walk_len {
-            return bad("walk_len", "must be at least 1 and at most walk_steps_per_round");
+            return bad(
+                "walk_len",
+                "must be at least 1 and at most walk_steps_per_round",
+            );
         }
         if !(0.0..=1.0).contains(&self.from_pivotal) {
             return bad("from_pivotal", "must be in [0, 1]");
@@ -171,14 +176,24 @@ pub struct Discovery {
 
 impl std::fmt::Debug for Discovery {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Discovery").field("rounds_done", &self.state.rounds_done).finish_non_exhaustive()
+        f.debug_struct("Discovery")
+            .field("rounds_done", &self.state.rounds_done)
+            .finish_non_exhaustive()
     }
 }
 
 /// The pose the latent model reads from an observation record.
 pub fn pose_of(m: &sim::EnvMeta, width: usize) -> AgentPose {
-    let carried = if m.carrying == sim::EnvMeta::CARRYING_NOTHING { 0 } else { m.carrying + 1 };
-    AgentPose { cell: m.y as u32 * width as u32 + m.x as u32, direction: m.dir & 3, carried }
+    let carried = if m.carrying == sim::EnvMeta::CARRYING_NOTHING {
+        0
+    } else {
+        m.carrying + 1
+    };
+    AgentPose {
+        cell: m.y as u32 * width as u32 + m.x as u32,
+        direction: m.dir & 3,
+        carried,
+    }
 }
 
 /// Doorway cells of a layout: passable cells with walls on two opposite
@@ -218,13 +233,17 @@ struct Walker {
 
 impl Discovery {
     /// A fresh discovery on `layout` with `num_envs` environments.
-    pub fn new(cfg: DiscoveryConfig, layout: &Layout, num_envs: usize, num_actions: usize) -> Result<Discovery, LearnerError> {
+    pub fn new(
+        cfg: DiscoveryConfig,
+        layout: &Layout,
+        num_envs: usize,
+        num_actions: usize,
+    ) -> Result<Discovery, LearnerError> {
         let mut cfg = cfg;
         cfg.latent.num_cells = (layout.width * layout.height) as i64;
         cfg.latent.num_actions = cfg.latent.num_actions.max(num_actions as i64);
         cfg.validate()?;
-        tch::manual_seed(cfg.seed as i64);
-        let latent = LatentTrainer::new(&cfg.latent, tch::Device::Cpu)?;
+        let latent = LatentTrainer::new(&cfg.latent, tch::Device::Cpu, cfg.seed)?;
         let gcp = GoalConditionedPolicy::new(&cfg.gcp, layout, num_envs, num_actions, cfg.seed)?;
         let state = State {
             config: cfg,
@@ -238,7 +257,13 @@ impl Discovery {
             rounds_without_improvement: 0,
             buffer: Vec::new(),
         };
-        Ok(Discovery { layout: layout.clone(), state, latent, gcp, buffer: Vec::new() })
+        Ok(Discovery {
+            layout: layout.clone(),
+            state,
+            latent,
+            gcp,
+            buffer: Vec::new(),
+        })
     }
 
     /// The configuration in force (with the maze's sizes filled in).
@@ -279,7 +304,8 @@ impl Discovery {
     /// True when the accuracy plateaued or the round budget is spent.
     pub fn finished(&self) -> bool {
         let c = &self.state.config;
-        self.state.rounds_done >= c.max_rounds || self.state.rounds_without_improvement >= c.patience
+        self.state.rounds_done >= c.max_rounds
+            || self.state.rounds_without_improvement >= c.patience
     }
 
     /// Prior mean of every cell index of the grid (walls included; 0 for
@@ -299,13 +325,22 @@ impl Discovery {
     /// action (the observed pose), then picks the next action. The first
     /// time a cell is reached, or by a shorter path, the actions since the
     /// reset are recorded as the way back to it.
-    fn collect_walks(&mut self, env: &mut dyn BatchEnvironment, rng: &mut SmallRng) -> Result<(Vec<Trajectory>, u64), EnvError> {
+    fn collect_walks(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+        rng: &mut SmallRng,
+    ) -> Result<(Vec<Trajectory>, u64), EnvError> {
         let cfg = self.state.config.clone();
         let n = env.num_envs();
         let width = env.observe().width;
         let num_actions = env.num_actions() as u8;
         let mut walkers: Vec<Walker> = (0..n)
-            .map(|_| Walker { phase: Phase::NeedReset, prefix: Vec::new(), states: Vec::new(), actions: Vec::new() })
+            .map(|_| Walker {
+                phase: Phase::NeedReset,
+                prefix: Vec::new(),
+                states: Vec::new(),
+                actions: Vec::new(),
+            })
             .collect();
         let mut out = Vec::new();
         let mut actions = vec![0u8; n];
@@ -335,7 +370,11 @@ impl Discovery {
                 }
                 if !ended {
                     *self.state.visits.entry(pose.cell).or_default() += 1;
-                    let known = self.state.paths.get(&pose.cell).map_or(usize::MAX, Vec::len);
+                    let known = self
+                        .state
+                        .paths
+                        .get(&pose.cell)
+                        .map_or(usize::MAX, Vec::len);
                     if w.prefix.len() < known {
                         self.state.paths.insert(pose.cell, w.prefix.clone());
                     }
@@ -343,10 +382,14 @@ impl Discovery {
                 actions[i] = match &mut w.phase {
                     Phase::NeedReset => {
                         w.prefix.clear();
-                        let pivot = (!self.state.pivotal.is_empty() && rng.random_bool(cfg.from_pivotal))
-                            .then(|| self.state.pivotal[rng.random_range(0..self.state.pivotal.len())]);
+                        let pivot = (!self.state.pivotal.is_empty()
+                            && rng.random_bool(cfg.from_pivotal))
+                        .then(|| self.state.pivotal[rng.random_range(0..self.state.pivotal.len())]);
                         w.phase = match pivot.and_then(|p| self.state.paths.get(&p)) {
-                            Some(path) if !path.is_empty() => Phase::Replay { path: path.clone(), next: 0 },
+                            Some(path) if !path.is_empty() => Phase::Replay {
+                                path: path.clone(),
+                                next: 0,
+                            },
                             _ => Phase::Walk { left: cfg.walk_len },
                         };
                         action::RESET
@@ -384,9 +427,12 @@ impl Discovery {
         let cfg = self.state.config.clone();
         let round = self.state.rounds_done;
         let mut rng = SmallRng::seed_from_u64(sim::env_seed(cfg.seed, 0x100_0000 + round as u64));
-        tch::manual_seed(sim::env_seed(cfg.seed, round as u64) as i64);
+        self.latent
+            .model_mut()
+            .reseed_noise(sim::env_seed(cfg.seed, round as u64));
         let n = env.num_envs();
-        env.step(&vec![action::RESET; n]).map_err(LearnerError::from)?;
+        env.step(&vec![action::RESET; n])
+            .map_err(LearnerError::from)?;
 
         // 1. Trajectories: random walks, then π_g rollouts.
         let (mut fresh, mut env_steps) = self.collect_walks(env, &mut rng)?;
@@ -402,7 +448,11 @@ impl Discovery {
                 *self.state.visits.entry(s.cell).or_default() += 1;
             }
         }
-        fresh.extend(gcp_trajectories.into_iter().filter(|t| !t.actions.is_empty()));
+        fresh.extend(
+            gcp_trajectories
+                .into_iter()
+                .filter(|t| !t.actions.is_empty()),
+        );
         let collected = fresh.len();
 
         // 2. The latent model, on the newest `buffer` trajectories.
@@ -413,23 +463,35 @@ impl Discovery {
         }
         let mut last = None;
         for _ in 0..cfg.latent_steps_per_round {
-            let batch: Vec<Trajectory> =
-                (0..cfg.latent_batch).map(|_| self.buffer[rng.random_range(0..self.buffer.len())].clone()).collect();
-            let tb = TrajectoryBatch::new(&batch, &self.latent.model().config().clone(), tch::Device::Cpu)?;
+            let batch: Vec<Trajectory> = (0..cfg.latent_batch)
+                .map(|_| self.buffer[rng.random_range(0..self.buffer.len())].clone())
+                .collect();
+            let tb = TrajectoryBatch::new(
+                &batch,
+                &self.latent.model().config().clone(),
+                tch::Device::Cpu,
+            )?;
             last = Some(self.latent.train_step(&tb));
         }
         let eval_set: Vec<Trajectory> = fresh.iter().take(256).cloned().collect();
         let eval = if eval_set.is_empty() {
             None
         } else {
-            let tb = TrajectoryBatch::new(&eval_set, &self.latent.model().config().clone(), tch::Device::Cpu)?;
+            let tb = TrajectoryBatch::new(
+                &eval_set,
+                &self.latent.model().config().clone(),
+                tch::Device::Cpu,
+            )?;
             Some(self.latent.model().evaluate(&tb))
         };
         let accuracy = eval.as_ref().map_or(0.0, |e| e.reconstruction_accuracy);
 
         // 3. V_p: the top `pivotal_ratio` of the visited cells by prior mean.
         let visited: Vec<u32> = self.state.visits.keys().copied().collect();
-        self.state.pivotal = self.latent.model().pivotal_states(&visited, cfg.pivotal_ratio);
+        self.state.pivotal = self
+            .latent
+            .model()
+            .pivotal_states(&visited, cfg.pivotal_ratio);
 
         // Plateau bookkeeping.
         if accuracy > self.state.best_accuracy + cfg.min_improvement {
@@ -439,7 +501,11 @@ impl Discovery {
             self.state.rounds_without_improvement += 1;
         }
         let mean = |f: fn(&GcpStats) -> f64| {
-            if gcp_stats.is_empty() { 0.0 } else { gcp_stats.iter().map(f).sum::<f64>() / gcp_stats.len() as f64 }
+            if gcp_stats.is_empty() {
+                0.0
+            } else {
+                gcp_stats.iter().map(f).sum::<f64>() / gcp_stats.len() as f64
+            }
         };
         let stats = RoundStats {
             round,
@@ -469,7 +535,15 @@ impl Discovery {
         self.state.buffer = self
             .buffer
             .iter()
-            .map(|t| (t.states.iter().map(|s| (s.cell, s.direction, s.carried)).collect(), t.actions.clone()))
+            .map(|t| {
+                (
+                    t.states
+                        .iter()
+                        .map(|s| (s.cell, s.direction, s.carried))
+                        .collect(),
+                    t.actions.clone(),
+                )
+            })
             .collect();
         let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e))?;
         self.state.buffer.clear();
@@ -481,26 +555,44 @@ impl Discovery {
     /// configuration and layout; returns whether it did.
     pub fn resume(&mut self, dir: &Path) -> Result<bool, LearnerError> {
         let path = dir.join("state.json");
-        let Ok(bytes) = std::fs::read(&path) else { return Ok(false) };
+        let Ok(bytes) = std::fs::read(&path) else {
+            return Ok(false);
+        };
         let state: State = serde_json::from_slice(&bytes).map_err(|e| ckpt(&path, e))?;
         if state.config != self.state.config || state.layout_name != self.layout.name {
             return Err(ckpt(
                 &path,
-                format!("belongs to another configuration or maze ({}); use another run directory", state.layout_name),
+                format!(
+                    "belongs to another configuration or maze ({}); use another run directory",
+                    state.layout_name
+                ),
             ));
         }
         let latent = dir.join("latent.ot");
-        self.latent.var_store_mut().load(&latent).map_err(|e| ckpt(&latent, e))?;
+        self.latent
+            .var_store_mut()
+            .load(&latent)
+            .map_err(|e| ckpt(&latent, e))?;
         self.gcp.load(&dir.join("gcp.ot"))?;
         self.buffer = state
             .buffer
             .iter()
             .map(|(s, a)| Trajectory {
-                states: s.iter().map(|&(cell, direction, carried)| AgentPose { cell, direction, carried }).collect(),
+                states: s
+                    .iter()
+                    .map(|&(cell, direction, carried)| AgentPose {
+                        cell,
+                        direction,
+                        carried,
+                    })
+                    .collect(),
                 actions: a.clone(),
             })
             .collect();
-        self.state = State { buffer: Vec::new(), ..state };
+        self.state = State {
+            buffer: Vec::new(),
+            ..state
+        };
         Ok(true)
     }
 
@@ -521,14 +613,20 @@ impl Discovery {
 
 fn finish(w: &mut Walker, out: &mut Vec<Trajectory>) {
     if !w.actions.is_empty() && w.states.len() == w.actions.len() + 1 {
-        out.push(Trajectory { states: std::mem::take(&mut w.states), actions: std::mem::take(&mut w.actions) });
+        out.push(Trajectory {
+            states: std::mem::take(&mut w.states),
+            actions: std::mem::take(&mut w.actions),
+        });
     }
     w.states.clear();
     w.actions.clear();
 }
 
 fn ckpt(path: &Path, e: impl std::fmt::Display) -> LearnerError {
-    LearnerError::Checkpoint { path: path.display().to_string(), message: e.to_string() }
+    LearnerError::Checkpoint {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
 }
 
 /// `VarStore::save` through a temporary file and a rename, so a crash never

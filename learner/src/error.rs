@@ -16,7 +16,10 @@ pub struct ConfigError {
 impl ConfigError {
     /// An error for `field` with a human-readable `reason`.
     pub fn new(field: &'static str, reason: impl Into<String>) -> Self {
-        Self { field, reason: reason.into() }
+        Self {
+            field,
+            reason: reason.into(),
+        }
     }
 }
 

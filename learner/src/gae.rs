@@ -54,15 +54,21 @@ pub fn generalized_advantages(
         let advantages = rewards.zeros_like();
         let mut last_gae_lam = bootstrap_value.zeros_like().to_kind(Kind::Float);
         for t in (0..steps).rev() {
-            let next_values =
-                if t + 1 == steps { bootstrap_value.detach().to_kind(Kind::Float) } else { values.get(t + 1) };
+            let next_values = if t + 1 == steps {
+                bootstrap_value.detach().to_kind(Kind::Float)
+            } else {
+                values.get(t + 1)
+            };
             let next_nonterminal = dones.get(t).neg() + 1.0;
             let delta = rewards.get(t) + next_values * gamma * &next_nonterminal - values.get(t);
             last_gae_lam = delta + last_gae_lam * next_nonterminal * (gamma * gae_lambda);
             advantages.get(t).copy_(&last_gae_lam);
         }
         let returns = &advantages + &values;
-        GaeOutput { advantages, returns }
+        GaeOutput {
+            advantages,
+            returns,
+        }
     })
 }
 
@@ -84,7 +90,13 @@ mod tests {
         lambda: f64,
     ) -> Vec<Vec<f64>> {
         let (t_len, b_len) = (rewards.len(), bootstrap.len());
-        let value_at = |t: usize, b: usize| if t == t_len { bootstrap[b] } else { values[t][b] };
+        let value_at = |t: usize, b: usize| {
+            if t == t_len {
+                bootstrap[b]
+            } else {
+                values[t][b]
+            }
+        };
         let mut out = vec![vec![0.0; b_len]; t_len];
         for b in 0..b_len {
             for t in 0..t_len {
@@ -115,7 +127,9 @@ mod tests {
         let mut rng = SmallRng::seed_from_u64(3);
         let (t_len, b_len) = (11, 7);
         let mut grid = |f: &mut dyn FnMut(&mut SmallRng) -> f64| -> Vec<Vec<f64>> {
-            (0..t_len).map(|_| (0..b_len).map(|_| f(&mut rng)).collect()).collect()
+            (0..t_len)
+                .map(|_| (0..b_len).map(|_| f(&mut rng)).collect())
+                .collect()
         };
         let rewards = grid(&mut |r| r.random_range(-1.0..1.0));
         let values = grid(&mut |r| r.random_range(-2.0..2.0));
@@ -153,7 +167,14 @@ mod tests {
         let rewards = Tensor::from_slice(&[1.0_f32, 0.0, 2.0]).view([3, 1]);
         let values = Tensor::from_slice(&[0.5_f32, 0.25, 1.0]).view([3, 1]);
         let dones = Tensor::from_slice(&[0.0_f32, 1.0, 0.0]).view([3, 1]);
-        let out = generalized_advantages(&rewards, &values, &dones, &Tensor::from_slice(&[4.0_f32]), 0.5, 0.0);
+        let out = generalized_advantages(
+            &rewards,
+            &values,
+            &dones,
+            &Tensor::from_slice(&[4.0_f32]),
+            0.5,
+            0.0,
+        );
         let adv: Vec<f32> = Vec::try_from(out.advantages.flatten(0, -1)).expect("float tensor");
         // 1 + 0.5·0.25 − 0.5; 0 − 0.25 (episode ended); 2 + 0.5·4 − 1.
         assert_eq!(adv, vec![0.625, -0.25, 3.0]);

@@ -26,7 +26,8 @@
 //!
 //! The environments come through [`BatchEnvironment`], so `π_g` trains
 //! in-process or over the shared-memory pipeline unchanged. Everything is
-//! deterministic for a seed: the weights' initialisation (`tch::manual_seed`),
+//! deterministic for a seed: the weights' initialisation
+//! ([`crate::seeding::init_seeded`]),
 //! and goals and actions drawn from the policy's own seeded RNGs.
 
 use std::path::Path;
@@ -123,10 +124,21 @@ impl GcpConfig {
     /// Checks every field's range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let unit = |field, v: f64| {
-            if (0.0..=1.0).contains(&v) { Ok(()) } else { Err(ConfigError::new(field, format!("{v} is not in [0, 1]"))) }
+            if (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                Err(ConfigError::new(field, format!("{v} is not in [0, 1]")))
+            }
         };
         let non_negative = |field, v: f64| {
-            if v >= 0.0 && v.is_finite() { Ok(()) } else { Err(ConfigError::new(field, format!("{v} must be finite and ≥ 0"))) }
+            if v >= 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                Err(ConfigError::new(
+                    field,
+                    format!("{v} must be finite and ≥ 0"),
+                ))
+            }
         };
         if self.rollout_len == 0 {
             return Err(ConfigError::new("rollout_len", "must be at least 1"));
@@ -143,19 +155,34 @@ impl GcpConfig {
         non_negative("value_coef", self.value_coef)?;
         non_negative("curiosity_coef", self.curiosity_coef)?;
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return Err(ConfigError::new("learning_rate", format!("{} must be finite and > 0", self.learning_rate)));
+            return Err(ConfigError::new(
+                "learning_rate",
+                format!("{} must be finite and > 0", self.learning_rate),
+            ));
         }
         if !(self.grad_clip_norm > 0.0 && self.grad_clip_norm.is_finite()) {
-            return Err(ConfigError::new("grad_clip_norm", format!("{} must be finite and > 0", self.grad_clip_norm)));
+            return Err(ConfigError::new(
+                "grad_clip_norm",
+                format!("{} must be finite and > 0", self.grad_clip_norm),
+            ));
         }
         if !self.goal_reward.is_finite() || !self.step_penalty.is_finite() {
-            return Err(ConfigError::new("goal_reward", "goal_reward and step_penalty must be finite"));
+            return Err(ConfigError::new(
+                "goal_reward",
+                "goal_reward and step_penalty must be finite",
+            ));
         }
         if self.conv_channels.iter().any(|&c| c < 1) {
-            return Err(ConfigError::new("conv_channels", format!("{:?} must be ≥ 1", self.conv_channels)));
+            return Err(ConfigError::new(
+                "conv_channels",
+                format!("{:?} must be ≥ 1", self.conv_channels),
+            ));
         }
         if self.hidden < 1 {
-            return Err(ConfigError::new("hidden", format!("{} must be ≥ 1", self.hidden)));
+            return Err(ConfigError::new(
+                "hidden",
+                format!("{} must be ≥ 1", self.hidden),
+            ));
         }
         Ok(())
     }
@@ -173,7 +200,9 @@ pub enum GcpError {
     #[error(transparent)]
     Learner(#[from] LearnerError),
     /// The environment batch is not the one the policy was built for.
-    #[error("the policy was built for {expected_envs} environments on a {expected_width}×{expected_height} grid; got {envs} on {width}×{height}")]
+    #[error(
+        "the policy was built for {expected_envs} environments on a {expected_width}×{expected_height} grid; got {envs} on {width}×{height}"
+    )]
     ShapeMismatch {
         /// Environments the policy was built for.
         expected_envs: usize,
@@ -249,7 +278,10 @@ impl GoalSampler {
             balls: BallSpawn::Layout,
             auto_reset: AutoReset::Off,
         };
-        GoalSampler { walker: Env::new(geometry, cfg, seed, 0), rng: SmallRng::seed_from_u64(seed) }
+        GoalSampler {
+            walker: Env::new(geometry, cfg, seed, 0),
+            rng: SmallRng::seed_from_u64(seed),
+        }
     }
 
     /// The end cell of a random walk of `walk_len` moves from `from`, never
@@ -320,24 +352,50 @@ struct GoalBook {
 }
 
 fn pose_of(meta: &EnvMeta) -> Pose {
-    Pose { x: meta.x, y: meta.y, dir: meta.dir }
+    Pose {
+        x: meta.x,
+        y: meta.y,
+        dir: meta.dir,
+    }
 }
 
 fn agent_pose(meta: &EnvMeta, width: usize) -> AgentPose {
-    let carried = if meta.carrying == EnvMeta::CARRYING_NOTHING { 0 } else { meta.carrying };
-    AgentPose { cell: (meta.y as usize * width + meta.x as usize) as u32, direction: meta.dir, carried }
+    let carried = if meta.carrying == EnvMeta::CARRYING_NOTHING {
+        0
+    } else {
+        meta.carrying
+    };
+    AgentPose {
+        cell: (meta.y as usize * width + meta.x as usize) as u32,
+        direction: meta.dir,
+        carried,
+    }
 }
 
 impl GoalBook {
     fn new(walk_len: usize, time_limit: u32, record: bool) -> GoalBook {
-        GoalBook { walk_len, time_limit, episodes: Vec::new(), finished: Vec::new(), record }
+        GoalBook {
+            walk_len,
+            time_limit,
+            episodes: Vec::new(),
+            finished: Vec::new(),
+            record,
+        }
     }
 
-    fn fresh_episode(&self, sampler: &mut GoalSampler, meta: &EnvMeta, width: usize) -> GoalEpisode {
+    fn fresh_episode(
+        &self,
+        sampler: &mut GoalSampler,
+        meta: &EnvMeta,
+        width: usize,
+    ) -> GoalEpisode {
         GoalEpisode {
             goal: sampler.draw(pose_of(meta), self.walk_len),
             steps: 0,
-            trajectory: Trajectory { states: vec![agent_pose(meta, width)], actions: Vec::new() },
+            trajectory: Trajectory {
+                states: vec![agent_pose(meta, width)],
+                actions: Vec::new(),
+            },
         }
     }
 
@@ -349,7 +407,11 @@ impl GoalBook {
     fn sync(&mut self, sampler: &mut GoalSampler, obs: &ObsView<'_>) -> Vec<bool> {
         let width = obs.width;
         if self.episodes.len() != obs.num_envs() {
-            self.episodes = obs.meta.iter().map(|m| self.fresh_episode(sampler, m, width)).collect();
+            self.episodes = obs
+                .meta
+                .iter()
+                .map(|m| self.fresh_episode(sampler, m, width))
+                .collect();
             return vec![true; obs.num_envs()];
         }
         let mut restarted = vec![false; obs.num_envs()];
@@ -393,7 +455,13 @@ impl GoalBook {
             }
             let goal_done = success || env_ended || episode.steps >= self.time_limit;
             let reward = cfg.step_penalty + if success { cfg.goal_reward } else { 0.0 };
-            out.push(GoalStep { reward, goal_done, env_ended, success, steps: episode.steps });
+            out.push(GoalStep {
+                reward,
+                goal_done,
+                env_ended,
+                success,
+                steps: episode.steps,
+            });
             if goal_done {
                 let next = self.fresh_episode(sampler, meta, width);
                 let done = std::mem::replace(&mut self.episodes[i], next);
@@ -461,9 +529,16 @@ impl GoalConditionedPolicy {
         if num_actions == 0 {
             return Err(ConfigError::new("num_actions", "must be at least 1").into());
         }
-        tch::manual_seed(seed as i64);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let net = ActorCritic::new(&vs.root(), &cfg.network(num_actions), layout.width, layout.height);
+        let (vs, net) = crate::seeding::init_seeded(seed, || {
+            let vs = nn::VarStore::new(Device::Cpu);
+            let net = ActorCritic::new(
+                &vs.root(),
+                &cfg.network(num_actions),
+                layout.width,
+                layout.height,
+            );
+            (vs, net)
+        });
         let opt = nn::Adam::default().build(&vs, cfg.learning_rate)?;
         let state = net.zero_state(num_envs as i64);
         Ok(GoalConditionedPolicy {
@@ -477,7 +552,11 @@ impl GoalConditionedPolicy {
             sampler: GoalSampler::new(layout, seed),
             eval_sampler: GoalSampler::new(layout, seed ^ EVAL_SEED_SALT),
             action_rng: SmallRng::seed_from_u64(seed ^ ACTION_SEED_SALT),
-            book: GoalBook::new(cfg.goal_walk_len, cfg.goal_time_limit(cfg.goal_walk_len), true),
+            book: GoalBook::new(
+                cfg.goal_walk_len,
+                cfg.goal_time_limit(cfg.goal_walk_len),
+                true,
+            ),
             state,
         })
     }
@@ -535,26 +614,8 @@ impl GoalConditionedPolicy {
     /// One action per environment from `logits` `[B, A]`: sampled from
     /// `softmax(logits)` with the policy's RNG, or the argmax when `greedy`.
     fn choose_actions(&mut self, logits: &Tensor, greedy: bool) -> Vec<u8> {
-        let num_actions = logits.size()[1] as usize;
-        let probs: Vec<f32> = tch::no_grad(|| Vec::try_from(logits.softmax(-1, Kind::Float).flatten(0, -1)))
-            .expect("invariant: softmax of float logits is a float tensor");
-        probs
-            .chunks_exact(num_actions)
-            .map(|p| {
-                let chosen = if greedy {
-                    p.iter().enumerate().fold(0, |best, (a, &q)| if q > p[best] { a } else { best })
-                } else {
-                    let u: f32 = self.action_rng.random();
-                    let mut cumulative = 0.0;
-                    p.iter().position(|&q| {
-                        cumulative += q;
-                        u < cumulative
-                    })
-                    .unwrap_or(num_actions - 1)
-                };
-                chosen as u8
-            })
-            .collect()
+        let probs = tch::no_grad(|| logits.softmax(-1, Kind::Float));
+        crate::seeding::sample_categorical(&mut self.action_rng, &probs, greedy)
     }
 
     /// One A2C update of `π_g` from a rollout of [`GcpConfig::rollout_len`]
@@ -606,13 +667,17 @@ impl GoalConditionedPolicy {
             let (out, chosen) = {
                 let obs = env.observe();
                 poses.extend(obs.meta.iter().map(|m| agent_pose(m, self.width)));
-                let out = self.net.forward(&encode_obs(&obs, Some(&self.book.goals())), &self.state);
+                let out = self
+                    .net
+                    .forward(&encode_obs(&obs, Some(&self.book.goals())), &self.state);
                 let chosen = self.choose_actions(&out.logits, false);
                 (out, chosen)
             };
             env.step(&chosen)?;
             let obs = env.observe();
-            let booked = self.book.advance(&mut self.sampler, &obs, &chosen, &self.cfg);
+            let booked = self
+                .book
+                .advance(&mut self.sampler, &obs, &chosen, &self.cfg);
             let goal_done: Vec<bool> = booked.iter().map(|s| s.goal_done).collect();
             for s in &booked {
                 rewards.push(s.reward);
@@ -634,14 +699,19 @@ impl GoalConditionedPolicy {
         let bootstrap_value = {
             let obs = env.observe();
             poses.extend(obs.meta.iter().map(|m| agent_pose(m, self.width)));
-            tch::no_grad(|| self.net.forward(&encode_obs(&obs, Some(&self.book.goals())), &self.state).value)
+            tch::no_grad(|| {
+                self.net
+                    .forward(&encode_obs(&obs, Some(&self.book.goals())), &self.state)
+                    .value
+            })
         };
 
         let shape = [steps as i64, b as i64];
         let mut rewards = Tensor::from_slice(&rewards).view(shape);
         let mut mean_curiosity = 0.0;
         if let Some(model) = curiosity {
-            let bonus = curiosity_bonus(model, &poses, &actions, &env_ended, steps, b)? * self.cfg.curiosity_coef;
+            let bonus = curiosity_bonus(model, &poses, &actions, &env_ended, steps, b)?
+                * self.cfg.curiosity_coef;
             mean_curiosity = bonus.mean(Kind::Float).double_value(&[]);
             rewards += bonus;
         }
@@ -659,19 +729,33 @@ impl GoalConditionedPolicy {
         );
 
         let log_probs = logits.log_softmax(-1, Kind::Float);
-        let taken = log_probs.gather(2, &actions.unsqueeze(-1), false).squeeze_dim(-1);
-        let entropy = -(log_probs.exp() * &log_probs).sum_dim_intlist(-1, false, Kind::Float).mean(Kind::Float);
+        let taken = log_probs
+            .gather(2, &actions.unsqueeze(-1), false)
+            .squeeze_dim(-1);
+        let entropy = -(log_probs.exp() * &log_probs)
+            .sum_dim_intlist(-1, false, Kind::Float)
+            .mean(Kind::Float);
         let policy_loss = -(gae.advantages * taken).mean(Kind::Float);
         let value_loss = (gae.returns - values).square().mean(Kind::Float) * 0.5;
-        let loss = &policy_loss + &value_loss * self.cfg.value_coef - &entropy * self.cfg.entropy_coef;
-        self.opt.backward_step_clip_norm(&loss, self.cfg.grad_clip_norm);
+        let loss =
+            &policy_loss + &value_loss * self.cfg.value_coef - &entropy * self.cfg.entropy_coef;
+        self.opt
+            .backward_step_clip_norm(&loss, self.cfg.grad_clip_norm);
         // Truncated BPTT: the next rollout starts from this state, detached.
         self.state = self.state.detach();
 
         Ok(GcpStats {
-            success_rate: if finished == 0 { 0.0 } else { successes as f64 / finished as f64 },
+            success_rate: if finished == 0 {
+                0.0
+            } else {
+                successes as f64 / finished as f64
+            },
             goals_finished: finished,
-            mean_steps_to_goal: if successes == 0 { 0.0 } else { success_steps as f64 / successes as f64 },
+            mean_steps_to_goal: if successes == 0 {
+                0.0
+            } else {
+                success_steps as f64 / successes as f64
+            },
             policy_loss: policy_loss.double_value(&[]),
             value_loss: value_loss.double_value(&[]),
             entropy: entropy.double_value(&[]),
@@ -694,7 +778,11 @@ impl GoalConditionedPolicy {
         goal_walk_len: usize,
         steps: usize,
     ) -> Result<f64, GcpError> {
-        let mut book = GoalBook::new(goal_walk_len.max(1), self.cfg.goal_time_limit(goal_walk_len), false);
+        let mut book = GoalBook::new(
+            goal_walk_len.max(1),
+            self.cfg.goal_time_limit(goal_walk_len),
+            false,
+        );
         {
             let obs = env.observe();
             self.check_shape(&obs)?;
@@ -709,7 +797,10 @@ impl GoalConditionedPolicy {
         while counted.iter().any(|&c| c) {
             let chosen = {
                 let obs = env.observe();
-                let out = tch::no_grad(|| self.net.forward(&encode_obs(&obs, Some(&book.goals())), &state));
+                let out = tch::no_grad(|| {
+                    self.net
+                        .forward(&encode_obs(&obs, Some(&book.goals())), &state)
+                });
                 state = out.state;
                 self.choose_actions(&out.logits, true)
             };
@@ -729,12 +820,19 @@ impl GoalConditionedPolicy {
             let goal_done: Vec<bool> = booked.iter().map(|s| s.goal_done).collect();
             state = state.reset_done(&mask(&goal_done));
         }
-        Ok(if finished == 0 { 0.0 } else { successes as f64 / finished as f64 })
+        Ok(if finished == 0 {
+            0.0
+        } else {
+            successes as f64 / finished as f64
+        })
     }
 }
 
 fn checkpoint_error(path: &Path, e: tch::TchError) -> LearnerError {
-    LearnerError::Checkpoint { path: path.display().to_string(), message: e.to_string() }
+    LearnerError::Checkpoint {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
 }
 
 /// `[B]` float mask, 1 where `flags[i]`.
@@ -784,7 +882,10 @@ fn curiosity_bonus(
     let mut bonus = vec![0f32; steps * b];
     if !trajectories.is_empty() {
         let batch = TrajectoryBatch::new(&trajectories, model.config(), Device::Cpu)?;
-        let errors = model.reconstruction_error(&batch).to_device(Device::Cpu).to_kind(Kind::Float);
+        let errors = model
+            .reconstruction_error(&batch)
+            .to_device(Device::Cpu)
+            .to_kind(Kind::Float);
         let max_len = errors.size()[0] as usize;
         let errors: Vec<f32> = Vec::try_from(errors.flatten(0, -1))?;
         let n = trajectories.len();
@@ -814,14 +915,33 @@ mod tests {
         let cfg = GcpConfig::default();
         assert_eq!(cfg.validate(), Ok(()));
         assert_eq!(cfg.goal_time_limit(6), 24);
-        let parsed: GcpConfig = serde_json::from_str(r#"{"goal_walk_len": 3}"#).expect("partial config parses");
-        assert_eq!(parsed, GcpConfig { goal_walk_len: 3, ..GcpConfig::default() });
+        let parsed: GcpConfig =
+            serde_json::from_str(r#"{"goal_walk_len": 3}"#).expect("partial config parses");
+        assert_eq!(
+            parsed,
+            GcpConfig {
+                goal_walk_len: 3,
+                ..GcpConfig::default()
+            }
+        );
         assert!(serde_json::from_str::<GcpConfig>(r#"{"goal_walk": 3}"#).is_err());
         for bad in [
-            GcpConfig { rollout_len: 0, ..GcpConfig::default() },
-            GcpConfig { gamma: 1.5, ..GcpConfig::default() },
-            GcpConfig { learning_rate: 0.0, ..GcpConfig::default() },
-            GcpConfig { curiosity_coef: -1.0, ..GcpConfig::default() },
+            GcpConfig {
+                rollout_len: 0,
+                ..GcpConfig::default()
+            },
+            GcpConfig {
+                gamma: 1.5,
+                ..GcpConfig::default()
+            },
+            GcpConfig {
+                learning_rate: 0.0,
+                ..GcpConfig::default()
+            },
+            GcpConfig {
+                curiosity_coef: -1.0,
+                ..GcpConfig::default()
+            },
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
         }
@@ -838,9 +958,16 @@ mod tests {
                 let (x, y) = (goal % layout.width, goal / layout.width);
                 assert_ne!((x, y), (1, 1), "a goal is never the agent's own cell");
                 assert_ne!(layout.cells[goal], Object::Wall as u8);
-                assert_ne!(layout.cells[goal], Object::Exit as u8, "walks that end the episode are redrawn");
+                assert_ne!(
+                    layout.cells[goal],
+                    Object::Exit as u8,
+                    "walks that end the episode are redrawn"
+                );
                 // At most one cell per forward move.
-                assert!(x - 1 + y - 1 <= walk_len, "walk of {walk_len} reached ({x}, {y})");
+                assert!(
+                    x - 1 + y - 1 <= walk_len,
+                    "walk of {walk_len} reached ({x}, {y})"
+                );
             }
         }
         // Same seed, same goals.
@@ -854,15 +981,26 @@ mod tests {
     #[test]
     fn training_is_deterministic_for_a_seed_and_weights_round_trip() -> Result<(), GcpError> {
         let layout = room();
-        let env_cfg = EnvConfig { balls: BallSpawn::Layout, ..EnvConfig::for_task(Task::MultiGoal, &layout) };
-        let cfg = GcpConfig { rollout_len: 4, hidden: 16, conv_channels: [4, 8], ..GcpConfig::default() };
-        let run = || -> Result<(Vec<GcpStats>, Vec<Trajectory>, GoalConditionedPolicy), GcpError> {
-            let mut env = InProcess::new(layout.clone(), env_cfg, 4, 11, 1)?;
-            let mut gcp = GoalConditionedPolicy::new(&cfg, &layout, 4, 3, 11)?;
-            let stats = (0..5).map(|_| gcp.train_iteration(&mut env, None)).collect::<Result<Vec<_>, _>>()?;
-            let trajectories = gcp.take_trajectories();
-            Ok((stats, trajectories, gcp))
+        let env_cfg = EnvConfig {
+            balls: BallSpawn::Layout,
+            ..EnvConfig::for_task(Task::MultiGoal, &layout)
         };
+        let cfg = GcpConfig {
+            rollout_len: 4,
+            hidden: 16,
+            conv_channels: [4, 8],
+            ..GcpConfig::default()
+        };
+        let run =
+            || -> Result<(Vec<GcpStats>, Vec<Trajectory>, GoalConditionedPolicy), GcpError> {
+                let mut env = InProcess::new(layout.clone(), env_cfg, 4, 11, 1)?;
+                let mut gcp = GoalConditionedPolicy::new(&cfg, &layout, 4, 3, 11)?;
+                let stats = (0..5)
+                    .map(|_| gcp.train_iteration(&mut env, None))
+                    .collect::<Result<Vec<_>, _>>()?;
+                let trajectories = gcp.take_trajectories();
+                Ok((stats, trajectories, gcp))
+            };
         let (stats_a, taus_a, gcp_a) = run()?;
         let (stats_b, taus_b, mut gcp_b) = run()?;
         assert_eq!(stats_a, stats_b);

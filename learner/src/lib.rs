@@ -18,6 +18,7 @@ pub mod error;
 pub mod gae;
 pub mod gcp;
 pub mod policy;
+pub mod seeding;
 pub mod shm_env;
 pub mod vae;
 

@@ -29,7 +29,10 @@ pub struct RandomPolicy {
 impl RandomPolicy {
     /// Actions in `0..num_actions`, seeded.
     pub fn new(num_actions: usize, seed: u64) -> RandomPolicy {
-        RandomPolicy { rng: SmallRng::seed_from_u64(seed), num_actions: num_actions.clamp(1, 255) as u8 }
+        RandomPolicy {
+            rng: SmallRng::seed_from_u64(seed),
+            num_actions: num_actions.clamp(1, 255) as u8,
+        }
     }
 }
 
@@ -52,16 +55,31 @@ pub struct ActorCriticPolicy {
     _vs: nn::VarStore,
     net: ActorCritic,
     state: LstmState,
+    /// Draws the sampled actions (see [`crate::seeding`]).
+    rng: SmallRng,
 }
 
 impl ActorCriticPolicy {
     /// A network for `num_envs` environments on `width × height` grids.
-    pub fn new(cfg: &ActorCriticConfig, num_envs: usize, width: usize, height: usize, seed: u64) -> ActorCriticPolicy {
-        tch::manual_seed(seed as i64);
-        let vs = nn::VarStore::new(tch::Device::Cpu);
-        let net = ActorCritic::new(&vs.root(), cfg, width, height);
+    pub fn new(
+        cfg: &ActorCriticConfig,
+        num_envs: usize,
+        width: usize,
+        height: usize,
+        seed: u64,
+    ) -> ActorCriticPolicy {
+        let (vs, net) = crate::seeding::init_seeded(seed, || {
+            let vs = nn::VarStore::new(tch::Device::Cpu);
+            let net = ActorCritic::new(&vs.root(), cfg, width, height);
+            (vs, net)
+        });
         let state = net.zero_state(num_envs as i64);
-        ActorCriticPolicy { _vs: vs, net, state }
+        ActorCriticPolicy {
+            _vs: vs,
+            net,
+            state,
+            rng: SmallRng::seed_from_u64(seed),
+        }
     }
 }
 
@@ -71,13 +89,17 @@ impl Policy for ActorCriticPolicy {
     }
     fn act(&mut self, obs: &ObsView<'_>, actions: &mut [u8]) {
         tch::no_grad(|| {
-            let done: Vec<f32> = obs.meta.iter().map(|m| f32::from(u8::from(m.done()))).collect();
+            let done: Vec<f32> = obs
+                .meta
+                .iter()
+                .map(|m| f32::from(u8::from(m.done())))
+                .collect();
             let state = self.state.reset_done(&tch::Tensor::from_slice(&done));
             let out = self.net.forward(&encode_obs(obs, None), &state);
-            let sampled = out.logits.softmax(-1, Kind::Float).multinomial(1, true).squeeze_dim(-1);
-            let v: Vec<i64> = Vec::<i64>::try_from(&sampled).expect("invariant: 1-D int64 tensor");
-            for (a, s) in actions.iter_mut().zip(v) {
-                *a = s as u8;
+            let probs = out.logits.softmax(-1, Kind::Float);
+            let sampled = crate::seeding::sample_categorical(&mut self.rng, &probs, false);
+            for (a, s) in actions.iter_mut().zip(sampled) {
+                *a = s;
             }
             self.state = out.state;
         });

@@ -19,7 +19,9 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::config::Config;
 use iceoryx2::prelude::Service;
-use shm_schemas::service::{ActPublisher, ObsSample, ObsSubscriber, PipelineNode, RunName, list_nodes};
+use shm_schemas::service::{
+    ActPublisher, ObsSample, ObsSubscriber, PipelineNode, RunName, list_nodes,
+};
 use shm_schemas::{Backoff, ObsShape, SeqEvent, SeqTracker};
 
 use crate::batch_env::{BatchEnvironment, EnvError, ObsView};
@@ -81,14 +83,23 @@ pub struct ShmEnv<S: Service> {
 
 impl<S: Service> std::fmt::Debug for ShmEnv<S> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ShmEnv").field("shape", &self.shape).field("stats", &self.stats).finish_non_exhaustive()
+        f.debug_struct("ShmEnv")
+            .field("shape", &self.shape)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
     }
 }
 
 impl<S: Service> ShmEnv<S> {
     /// Opens the run's observation and action services for a batch of
     /// `shape` and waits for the first observation batch.
-    pub fn connect(config: &Config, run: RunName, shape: ObsShape, num_actions: usize, opts: ShmEnvOptions) -> Result<ShmEnv<S>, EnvError> {
+    pub fn connect(
+        config: &Config,
+        run: RunName,
+        shape: ObsShape,
+        num_actions: usize,
+        opts: ShmEnvOptions,
+    ) -> Result<ShmEnv<S>, EnvError> {
         let node = PipelineNode::<S>::new(config, run, &opts.node_name)?;
         node.cleanup_dead_nodes();
         let obs = node.obs_subscriber(shape)?;
@@ -130,7 +141,11 @@ impl<S: Service> ShmEnv<S> {
     /// Whether the sim's node is alive now.
     pub fn sim_alive(&self) -> bool {
         list_nodes::<S>(&self.config)
-            .map(|nodes| nodes.iter().any(|n| n.alive && n.name == self.opts.sim_node_name))
+            .map(|nodes| {
+                nodes
+                    .iter()
+                    .any(|n| n.alive && n.name == self.opts.sim_node_name)
+            })
             .unwrap_or(false)
     }
 
@@ -152,7 +167,10 @@ impl<S: Service> ShmEnv<S> {
     }
 
     fn stopped(&self) -> bool {
-        self.opts.stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed))
+        self.opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
     }
 
     /// Spins until a batch newer than `after` arrives (`None`: any batch).
@@ -205,7 +223,11 @@ impl<S: Service> ShmEnv<S> {
                     if after.is_some() && now - since >= self.opts.peer_timeout {
                         return Err(EnvError::PeerGone {
                             peer: "sim",
-                            detail: format!("no live '{}' node for {:?}", self.opts.sim_node_name, now - since),
+                            detail: format!(
+                                "no live '{}' node for {:?}",
+                                self.opts.sim_node_name,
+                                now - since
+                            ),
                         });
                     }
                 }
@@ -228,7 +250,10 @@ impl<S: Service> BatchEnvironment for ShmEnv<S> {
         self.num_actions
     }
     fn observe(&self) -> ObsView<'_> {
-        let sample = self.current.as_ref().expect("invariant: connect() received a first batch");
+        let sample = self
+            .current
+            .as_ref()
+            .expect("invariant: connect() received a first batch");
         let b = sample.batch();
         ObsView {
             seq: b.header.seq,
@@ -240,9 +265,16 @@ impl<S: Service> BatchEnvironment for ShmEnv<S> {
     }
     fn step(&mut self, actions: &[u8]) -> Result<(), EnvError> {
         if actions.len() != self.num_envs() {
-            return Err(EnvError::ActionCount { expected: self.num_envs(), got: actions.len() });
+            return Err(EnvError::ActionCount {
+                expected: self.num_envs(),
+                got: actions.len(),
+            });
         }
-        let seq = self.current.as_ref().map(|s| s.header().seq).expect("invariant: a batch is held");
+        let seq = self
+            .current
+            .as_ref()
+            .map(|s| s.header().seq)
+            .expect("invariant: a batch is held");
         // Release the observation chunk before answering, so the simulator
         // never runs out of chunks to loan.
         self.current = None;

@@ -29,12 +29,20 @@ const WALK_LEN: usize = 4;
 
 fn room() -> anyhow::Result<(Layout, EnvConfig)> {
     let layout = Layout::parse("room", ROOM)?;
-    let env = EnvConfig { task: Task::MultiGoal, max_steps: 200, balls: BallSpawn::Layout, auto_reset: AutoReset::SameStep };
+    let env = EnvConfig {
+        task: Task::MultiGoal,
+        max_steps: 200,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::SameStep,
+    };
     Ok((layout, env))
 }
 
 fn config() -> GcpConfig {
-    GcpConfig { goal_walk_len: WALK_LEN, ..GcpConfig::default() }
+    GcpConfig {
+        goal_walk_len: WALK_LEN,
+        ..GcpConfig::default()
+    }
 }
 
 /// Greedy success rate on held-out goals before and after `iterations`
@@ -53,12 +61,17 @@ fn train_and_evaluate(seed: u64, iterations: usize) -> anyhow::Result<(f64, f64,
         let stats = gcp.train_iteration(&mut train_env, None)?;
         if i % 100 == 0 {
             let secs = start.elapsed().as_secs_f64();
-            eprintln!("seed {seed} iteration {i} ({secs:.1} s): {}", serde_json::to_string(&stats)?);
+            eprintln!(
+                "seed {seed} iteration {i} ({secs:.1} s): {}",
+                serde_json::to_string(&stats)?
+            );
         }
     }
     let seconds = start.elapsed().as_secs_f64();
     let after = gcp.evaluate(&mut eval_env, WALK_LEN, 200)?;
-    eprintln!("seed {seed}: greedy success {before:.3} → {after:.3} after {iterations} updates in {seconds:.1} s");
+    eprintln!(
+        "seed {seed}: greedy success {before:.3} → {after:.3} after {iterations} updates in {seconds:.1} s"
+    );
     Ok((before, after, seconds))
 }
 
@@ -87,7 +100,10 @@ fn goal_conditioned_policy_learns_to_reach_nearby_goals() -> anyhow::Result<()> 
 fn goal_conditioned_policy_learns_for_three_seeds() -> anyhow::Result<()> {
     for seed in [1, 2, 3] {
         let (before, after, _) = train_and_evaluate(seed, ITERATIONS)?;
-        assert!(after >= 0.8 && after >= before + 0.3, "seed {seed}: {before:.3} → {after:.3}");
+        assert!(
+            after >= 0.8 && after >= before + 0.3,
+            "seed {seed}: {before:.3} → {after:.3}"
+        );
     }
     Ok(())
 }
@@ -103,7 +119,7 @@ fn curiosity_enters_the_rewards_and_goal_episodes_become_trajectories() -> anyho
         state_dim: 8,
         ..LatentConfig::default()
     };
-    let latent = LatentTrainer::new(&latent_cfg, tch::Device::Cpu)?;
+    let latent = LatentTrainer::new(&latent_cfg, tch::Device::Cpu, 5)?;
     let mut env = InProcess::new(layout.clone(), env_cfg, 8, 5, 1)?;
     let mut gcp = GoalConditionedPolicy::new(&config(), &layout, 8, num_actions, 5)?;
     let mut finished = 0;

@@ -20,7 +20,9 @@
 //! The generator is written here on purpose: the test must not depend on the
 //! `sim` crate.
 
-use learner::vae::{AgentPose, LatentConfig, LatentStats, LatentTrainer, Trajectory, TrajectoryBatch};
+use learner::vae::{
+    AgentPose, LatentConfig, LatentStats, LatentTrainer, Trajectory, TrajectoryBatch,
+};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use std::collections::VecDeque;
@@ -61,12 +63,25 @@ impl Maze {
     fn parse(text: &str) -> Self {
         let rows: Vec<&[u8]> = text.lines().map(str::as_bytes).collect();
         let (width, height) = (rows[0].len() as i64, rows.len() as i64);
-        let free: Vec<bool> = rows.iter().flat_map(|row| row.iter().map(|&c| c != b'#')).collect();
-        let mut maze = Self { width, free, doorways: Vec::new(), room: Vec::new(), distance: Vec::new() };
+        let free: Vec<bool> = rows
+            .iter()
+            .flat_map(|row| row.iter().map(|&c| c != b'#'))
+            .collect();
+        let mut maze = Self {
+            width,
+            free,
+            doorways: Vec::new(),
+            room: Vec::new(),
+            distance: Vec::new(),
+        };
         // A doorway is a free cell with walls on both sides along one axis
         // and free cells on both sides along the other.
         for cell in 0..(width * height) as u32 {
-            let wall = |dx, dy| !maze.neighbour(cell, dx, dy).is_some_and(|n| maze.free[n as usize]);
+            let wall = |dx, dy| {
+                !maze
+                    .neighbour(cell, dx, dy)
+                    .is_some_and(|n| maze.free[n as usize])
+            };
             let gap_x = wall(-1, 0) && wall(1, 0) && !wall(0, -1) && !wall(0, 1);
             let gap_y = wall(0, -1) && wall(0, 1) && !wall(-1, 0) && !wall(1, 0);
             if maze.free[cell as usize] && (gap_x || gap_y) {
@@ -74,20 +89,28 @@ impl Maze {
             }
         }
         maze.room = maze.rooms();
-        maze.distance = (0..maze.free.len() as u32).map(|goal| maze.distances_to(goal)).collect();
+        maze.distance = (0..maze.free.len() as u32)
+            .map(|goal| maze.distances_to(goal))
+            .collect();
         maze
     }
 
     fn neighbour(&self, cell: u32, dx: i64, dy: i64) -> Option<u32> {
-        let (x, y) = (i64::from(cell) % self.width + dx, i64::from(cell) / self.width + dy);
+        let (x, y) = (
+            i64::from(cell) % self.width + dx,
+            i64::from(cell) / self.width + dy,
+        );
         let height = self.free.len() as i64 / self.width;
         (0..self.width).contains(&x).then_some(())?;
-        (0..height).contains(&y).then(|| (y * self.width + x) as u32)
+        (0..height)
+            .contains(&y)
+            .then(|| (y * self.width + x) as u32)
     }
 
     fn step(&self, cell: u32, action: usize) -> Option<u32> {
         let (dx, dy) = MOVES[action];
-        self.neighbour(cell, dx, dy).filter(|&n| self.free[n as usize])
+        self.neighbour(cell, dx, dy)
+            .filter(|&n| self.free[n as usize])
     }
 
     /// Rooms: connected components of the free cells once doorways are closed.
@@ -95,7 +118,10 @@ impl Maze {
         let mut room = vec![usize::MAX; self.free.len()];
         let mut next_room = 0;
         for start in 0..self.free.len() as u32 {
-            if !self.free[start as usize] || self.doorways.contains(&start) || room[start as usize] != usize::MAX {
+            if !self.free[start as usize]
+                || self.doorways.contains(&start)
+                || room[start as usize] != usize::MAX
+            {
                 continue;
             }
             let mut stack = vec![start];
@@ -137,11 +163,15 @@ impl Maze {
     }
 
     fn room_cells(&self) -> Vec<u32> {
-        (0..self.free.len() as u32).filter(|&c| self.room[c as usize] != usize::MAX).collect()
+        (0..self.free.len() as u32)
+            .filter(|&c| self.room[c as usize] != usize::MAX)
+            .collect()
     }
 
     fn free_cells(&self) -> Vec<u32> {
-        (0..self.free.len() as u32).filter(|&c| self.free[c as usize]).collect()
+        (0..self.free.len() as u32)
+            .filter(|&c| self.free[c as usize])
+            .collect()
     }
 
     /// The room on the other side of `door` from `room`.
@@ -156,7 +186,12 @@ impl Maze {
     fn exits(&self, room: usize) -> Vec<(u32, usize)> {
         self.doorways
             .iter()
-            .filter(|&&d| (0..4).any(|a| self.step(d, a).is_some_and(|n| self.room[n as usize] == room)))
+            .filter(|&&d| {
+                (0..4).any(|a| {
+                    self.step(d, a)
+                        .is_some_and(|n| self.room[n as usize] == room)
+                })
+            })
             .filter_map(|&d| self.across(d, room).map(|next| (d, next)))
             .collect()
     }
@@ -188,11 +223,18 @@ impl Maze {
     fn walk(&self, rng: &mut SmallRng) -> Trajectory {
         let cells = self.room_cells();
         let start = cells[rng.random_range(0..cells.len())];
-        let mut tau = Trajectory { states: vec![AgentPose::at(start)], actions: Vec::new() };
+        let mut tau = Trajectory {
+            states: vec![AgentPose::at(start)],
+            actions: Vec::new(),
+        };
         let mut room = self.room[start as usize];
         for _ in 0..rng.random_range(1..=3) {
             let here = tau.states.last().map_or(start, |s| s.cell);
-            let exits: Vec<(u32, usize)> = self.exits(room).into_iter().filter(|&(d, _)| d != here).collect();
+            let exits: Vec<(u32, usize)> = self
+                .exits(room)
+                .into_iter()
+                .filter(|&(d, _)| d != here)
+                .collect();
             let (door, next) = exits[rng.random_range(0..exits.len())];
             self.walk_to(&mut tau, door, rng);
             if rng.random_bool(0.5) {
@@ -200,7 +242,11 @@ impl Maze {
             }
         }
         let here = tau.states.last().map_or(start, |s| s.cell);
-        let ends: Vec<u32> = cells.iter().copied().filter(|&c| self.room[c as usize] == room && c != here).collect();
+        let ends: Vec<u32> = cells
+            .iter()
+            .copied()
+            .filter(|&c| self.room[c as usize] == room && c != here)
+            .collect();
         let end = ends[rng.random_range(0..ends.len())];
         self.walk_to(&mut tau, end, rng);
         tau
@@ -223,7 +269,12 @@ struct Outcome {
 fn small_config(num_cells: i64) -> LatentConfig {
     // The walker has no facing: one direction, so `prior_mean` averages over
     // exactly the poses that were visited.
-    let mut cfg = LatentConfig { num_cells, num_actions: 4, num_directions: 1, ..LatentConfig::default() };
+    let mut cfg = LatentConfig {
+        num_cells,
+        num_actions: 4,
+        num_directions: 1,
+        ..LatentConfig::default()
+    };
     cfg.lstm_hidden = 32;
     cfg.state_dim = 16;
     cfg.prior_hidden = 32;
@@ -233,13 +284,16 @@ fn small_config(num_cells: i64) -> LatentConfig {
 fn discover(seed: u64, steps: usize, batch_size: usize) -> anyhow::Result<Outcome> {
     // Tiny ops: one intra-op thread avoids spinning worker threads.
     tch::set_num_threads(1);
-    tch::manual_seed(seed as i64);
     let mut rng = SmallRng::seed_from_u64(seed);
     let maze = Maze::parse(FOUR_ROOMS);
-    anyhow::ensure!(maze.doorways.len() == 4, "four doorways, found {:?}", maze.doorways);
+    anyhow::ensure!(
+        maze.doorways.len() == 4,
+        "four doorways, found {:?}",
+        maze.doorways
+    );
     let cfg = small_config(maze.free.len() as i64);
     let started = Instant::now();
-    let mut trainer = LatentTrainer::new(&cfg, Device::Cpu)?;
+    let mut trainer = LatentTrainer::new(&cfg, Device::Cpu, seed)?;
     let verbose = std::env::var_os("WG_VERBOSE").is_some();
     let mut last = None;
     let mut lambda_bands = [(f64::INFINITY, f64::NEG_INFINITY); 3];
@@ -247,7 +301,10 @@ fn discover(seed: u64, steps: usize, batch_size: usize) -> anyhow::Result<Outcom
         let walks: Vec<Trajectory> = (0..batch_size).map(|_| maze.walk(&mut rng)).collect();
         let stats = trainer.train_step(&TrajectoryBatch::new(&walks, &cfg, Device::Cpu)?);
         if verbose && step % 100 == 0 {
-            eprintln!("step {step} ({:.1}s): {stats:?}", started.elapsed().as_secs_f64());
+            eprintln!(
+                "step {step} ({:.1}s): {stats:?}",
+                started.elapsed().as_secs_f64()
+            );
         }
         if step + 200 >= steps {
             let lambdas = [stats.lambda_kl, stats.lambda_l0, stats.lambda_transition];
@@ -282,7 +339,9 @@ fn discover(seed: u64, steps: usize, batch_size: usize) -> anyhow::Result<Outcom
         // Posterior keep rate per cell over fresh walks: digit = 10·E[1 − P0].
         let walks: Vec<Trajectory> = (0..512).map(|_| maze.walk(&mut rng)).collect();
         let batch = TrajectoryBatch::new(&walks, &cfg, Device::Cpu)?;
-        let keep: tch::Tensor = tch::no_grad(|| (1.0_f64 - model.posterior(&batch).prob_zero()) * batch.interior_mask());
+        let keep: tch::Tensor = tch::no_grad(|| {
+            (1.0_f64 - model.posterior(&batch).prob_zero()) * batch.interior_mask()
+        });
         let keep = Vec::<f32>::try_from(keep.flatten(0, -1))?;
         let cells = Vec::<i64>::try_from(batch.cells.flatten(0, -1))?;
         let inside = Vec::<f32>::try_from(batch.interior_mask().flatten(0, -1))?;
@@ -295,15 +354,26 @@ fn discover(seed: u64, steps: usize, batch_size: usize) -> anyhow::Result<Outcom
             let row: String = (0..13)
                 .map(|x| {
                     let c = y * 13 + x;
-                    if count[c] == 0.0 { '#' } else { char::from(b'0' + ((sum[c] / count[c]) * 9.99) as u8) }
+                    if count[c] == 0.0 {
+                        '#'
+                    } else {
+                        char::from(b'0' + ((sum[c] / count[c]) * 9.99) as u8)
+                    }
                 })
                 .collect();
             eprintln!("{row}");
         }
     }
-    let rank_of = |cell: u32| order.iter().position(|&i| visited[i] == cell).unwrap_or(usize::MAX);
+    let rank_of = |cell: u32| {
+        order
+            .iter()
+            .position(|&i| visited[i] == cell)
+            .unwrap_or(usize::MAX)
+    };
     let test_walks: Vec<Trajectory> = (0..256).map(|_| maze.walk(&mut rng)).collect();
-    let accuracy = model.evaluate(&TrajectoryBatch::new(&test_walks, &cfg, Device::Cpu)?).reconstruction_accuracy;
+    let accuracy = model
+        .evaluate(&TrajectoryBatch::new(&test_walks, &cfg, Device::Cpu)?)
+        .reconstruction_accuracy;
     Ok(Outcome {
         doorways_found: maze.doorways.iter().filter(|d| pivotal.contains(d)).count(),
         doorway_ranks: maze.doorways.iter().map(|&d| rank_of(d)).collect(),
@@ -318,17 +388,33 @@ fn discover(seed: u64, steps: usize, batch_size: usize) -> anyhow::Result<Outcom
 fn maze_has_four_doorways_and_four_rooms() {
     let maze = Maze::parse(FOUR_ROOMS);
     assert_eq!(maze.free_cells().len(), 104);
-    assert_eq!(maze.doorways, vec![3 * 13 + 6, 6 * 13 + 2, 7 * 13 + 9, 10 * 13 + 6]);
-    assert_eq!(maze.room.iter().filter(|&&r| r != usize::MAX).max(), Some(&3));
+    assert_eq!(
+        maze.doorways,
+        vec![3 * 13 + 6, 6 * 13 + 2, 7 * 13 + 9, 10 * 13 + 6]
+    );
+    assert_eq!(
+        maze.room.iter().filter(|&&r| r != usize::MAX).max(),
+        Some(&3)
+    );
     let mut rng = SmallRng::seed_from_u64(0);
     for _ in 0..100 {
         let tau = maze.walk(&mut rng);
         assert_eq!(tau.states.len(), tau.actions.len() + 1);
         for (t, &a) in tau.actions.iter().enumerate() {
-            assert_eq!(maze.step(tau.states[t].cell, usize::from(a)), Some(tau.states[t + 1].cell));
+            assert_eq!(
+                maze.step(tau.states[t].cell, usize::from(a)),
+                Some(tau.states[t + 1].cell)
+            );
         }
-        let crossings = tau.states.iter().filter(|s| maze.doorways.contains(&s.cell)).count();
-        assert!((1..=3).contains(&crossings), "crosses 1 to 3 doorways, got {crossings}");
+        let crossings = tau
+            .states
+            .iter()
+            .filter(|s| maze.doorways.contains(&s.cell))
+            .count();
+        assert!(
+            (1..=3).contains(&crossings),
+            "crosses 1 to 3 doorways, got {crossings}"
+        );
     }
 }
 
@@ -379,7 +465,10 @@ fn doorways_rank_among_the_pivotal_states() -> anyhow::Result<()> {
 }
 
 fn assert_multipliers_settled(outcome: &Outcome) {
-    for (name, (low, high)) in ["λ1 (KL)", "λ2 (L0)", "λ3 (LT)"].iter().zip(outcome.lambda_bands) {
+    for (name, (low, high)) in ["λ1 (KL)", "λ2 (L0)", "λ3 (LT)"]
+        .iter()
+        .zip(outcome.lambda_bands)
+    {
         assert!(
             0.01 <= low && high <= 5.0,
             "{name} over the last 200 steps spans [{low:.4}, {high:.4}], outside [0.01, 5] (clamps 1e-4 and 10)"
@@ -402,7 +491,10 @@ fn doorways_across_seeds() -> anyhow::Result<()> {
         found += outcome.doorways_found;
     }
     let rate = found as f64 / (4 * seeds.len()) as f64;
-    eprintln!("doorway rate {rate:.2} over {} seeds (chance 0.20)", seeds.len());
+    eprintln!(
+        "doorway rate {rate:.2} over {} seeds (chance 0.20)",
+        seeds.len()
+    );
     assert!(rate >= 0.6, "doorway rate {rate:.2}, chance 0.20");
     Ok(())
 }

@@ -38,7 +38,10 @@ fn lstm_with_adam_learns_to_recall_the_first_bit() {
     }
     let trained = tch::no_grad(|| loss_on(&eval_bits)).double_value(&[]);
     eprintln!("tch smoke: loss {initial:.4} -> {trained:.4}");
-    assert!(initial > 0.6, "an untrained classifier is near chance (ln 2), got {initial}");
+    assert!(
+        initial > 0.6,
+        "an untrained classifier is near chance (ln 2), got {initial}"
+    );
     assert!(
         trained < initial / 20.0,
         "loss should fall by ≥20×: initial {initial:.4}, trained {trained:.4}"

@@ -113,13 +113,22 @@ impl PlannerConfig {
         }
         // One simulator runs a node's walks; its step counter is a u32.
         if u64::from(self.walks_per_node) * u64::from(self.walk_len) > MAX_STEPS_PER_NODE {
-            return bad("walks_per_node", format!("{} walks of {} actions exceed {MAX_STEPS_PER_NODE} steps per node", self.walks_per_node, self.walk_len));
+            return bad(
+                "walks_per_node",
+                format!(
+                    "{} walks of {} actions exceed {MAX_STEPS_PER_NODE} steps per node",
+                    self.walks_per_node, self.walk_len
+                ),
+            );
         }
         match &self.candidates {
-            CandidateSet::Random { k } if *k == 0 || *k > MAX_NODES => {
-                bad("candidates.random.k", format!("{k} is not in 1..={MAX_NODES}"))
+            CandidateSet::Random { k } if *k == 0 || *k > MAX_NODES => bad(
+                "candidates.random.k",
+                format!("{k} is not in 1..={MAX_NODES}"),
+            ),
+            CandidateSet::File { path } if path.is_empty() => {
+                bad("candidates.file.path", "is empty".into())
             }
-            CandidateSet::File { path } if path.is_empty() => bad("candidates.file.path", "is empty".into()),
             _ => Ok(()),
         }
     }
@@ -139,22 +148,49 @@ mod tests {
 
     #[test]
     fn defaults_validate_and_bad_values_name_their_field() {
-        PlannerConfig::default().validate().expect("defaults are valid");
-        let c = PlannerConfig { walk_len: 0, ..PlannerConfig::default() };
+        PlannerConfig::default()
+            .validate()
+            .expect("defaults are valid");
+        let c = PlannerConfig {
+            walk_len: 0,
+            ..PlannerConfig::default()
+        };
         let e = c.validate().expect_err("walk_len 0").to_string();
         assert!(e.contains("walk_len"), "{e}");
-        let c = PlannerConfig { candidates: CandidateSet::Random { k: 0 }, ..PlannerConfig::default() };
-        assert!(c.validate().expect_err("k 0").to_string().contains("candidates.random.k"));
-        let c = PlannerConfig { walks_per_node: 1 << 20, walk_len: 1 << 12, ..PlannerConfig::default() };
-        assert!(c.validate().expect_err("too many steps").to_string().contains("walks_per_node"));
+        let c = PlannerConfig {
+            candidates: CandidateSet::Random { k: 0 },
+            ..PlannerConfig::default()
+        };
+        assert!(
+            c.validate()
+                .expect_err("k 0")
+                .to_string()
+                .contains("candidates.random.k")
+        );
+        let c = PlannerConfig {
+            walks_per_node: 1 << 20,
+            walk_len: 1 << 12,
+            ..PlannerConfig::default()
+        };
+        assert!(
+            c.validate()
+                .expect_err("too many steps")
+                .to_string()
+                .contains("walks_per_node")
+        );
     }
 
     #[test]
     fn partial_json_fills_defaults_and_unknown_fields_are_refused() {
-        let c: PlannerConfig = serde_json::from_str(r#"{"seed": 7, "candidates": "all"}"#).expect("parses");
-        assert_eq!((c.seed, c.candidates, c.walk_len), (7, CandidateSet::All, PlannerConfig::default().walk_len));
+        let c: PlannerConfig =
+            serde_json::from_str(r#"{"seed": 7, "candidates": "all"}"#).expect("parses");
+        assert_eq!(
+            (c.seed, c.candidates, c.walk_len),
+            (7, CandidateSet::All, PlannerConfig::default().walk_len)
+        );
         assert!(serde_json::from_str::<PlannerConfig>(r#"{"walks": 3}"#).is_err());
-        let c: PlannerConfig = serde_json::from_str(r#"{"candidates": {"random": {"k": 5}}}"#).expect("parses");
+        let c: PlannerConfig =
+            serde_json::from_str(r#"{"candidates": {"random": {"k": 5}}}"#).expect("parses");
         assert_eq!(c.candidates, CandidateSet::Random { k: 5 });
     }
 }

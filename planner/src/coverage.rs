@@ -23,7 +23,12 @@ pub struct Coverage {
 impl Coverage {
     /// Zero counts for a `width × height` grid.
     pub fn new(width: usize, height: usize) -> Coverage {
-        Coverage { width, height, counts: vec![0; width * height], total: 0 }
+        Coverage {
+            width,
+            height,
+            counts: vec![0; width * height],
+            total: 0,
+        }
     }
 
     /// Zero counts for `layout`'s grid.
@@ -114,7 +119,11 @@ mod tests {
     fn counts_positions_of_a_batch_and_renders() {
         let layout = sim::Maze::Small.layout(false);
         let mut cov = Coverage::for_layout(&layout);
-        let at = |x, y| EnvMeta { x, y, ..EnvMeta::EMPTY };
+        let at = |x, y| EnvMeta {
+            x,
+            y,
+            ..EnvMeta::EMPTY
+        };
         cov.observe(&[at(1, 1), at(1, 1), at(2, 1), at(200, 1)]);
         assert_eq!(cov.count(CellIdx::from_xy(1, 1, layout.width)), 2);
         assert_eq!((cov.total(), cov.visited_cells()), (3, 2));

@@ -94,7 +94,9 @@ impl EdgePath {
     /// key): replaying it after such a change needs the bookkeeping of
     /// [`crate::world_graph::RouteWorld`].
     pub fn changes_world(&self) -> bool {
-        self.actions.iter().any(|&a| a == action::PICKUP || a == action::TOGGLE)
+        self.actions
+            .iter()
+            .any(|&a| a == action::PICKUP || a == action::TOGGLE)
     }
 }
 
@@ -119,15 +121,28 @@ impl EdgeWorld {
     /// The walk world of `layout` with nodes at `nodes` (checked by
     /// [`crate::pivotal::check_nodes`] beforehand) and the rules of `task`.
     pub fn new(layout: &Layout, nodes: &[CellIdx], task: Task) -> EdgeWorld {
-        let cfg = EnvConfig { task, max_steps: u32::MAX, balls: BallSpawn::Layout, auto_reset: AutoReset::Off };
+        let cfg = EnvConfig {
+            task,
+            max_steps: u32::MAX,
+            balls: BallSpawn::Layout,
+            auto_reset: AutoReset::Off,
+        };
         let template = Env::new(layout.clone(), cfg, 0, 0);
         let mut node_of_cell = vec![NO_NODE; layout.cells.len()];
         for (i, c) in nodes.iter().enumerate() {
             node_of_cell[c.index()] = i as u16;
         }
         let slots = layout.cells.len() * sim::object::NUM_OBJECTS + CARRY_SLOTS;
-        let zobrist = (0..slots as u64).map(|i| sim::env_seed(0x5a0b_7157, i)).collect();
-        EdgeWorld { template, nodes: nodes.to_vec(), node_of_cell, zobrist, multigoal: task.is_multigoal() }
+        let zobrist = (0..slots as u64)
+            .map(|i| sim::env_seed(0x5a0b_7157, i))
+            .collect();
+        EdgeWorld {
+            template,
+            nodes: nodes.to_vec(),
+            node_of_cell,
+            zobrist,
+            multigoal: task.is_multigoal(),
+        }
     }
 
     /// The layout.
@@ -143,7 +158,11 @@ impl EdgeWorld {
     /// The node standing on `cell`, if any.
     #[inline]
     pub fn node_at(&self, cell: CellIdx) -> Option<NodeId> {
-        self.node_of_cell.get(cell.index()).copied().filter(|&n| n != NO_NODE).map(NodeId)
+        self.node_of_cell
+            .get(cell.index())
+            .copied()
+            .filter(|&n| n != NO_NODE)
+            .map(NodeId)
     }
 
     #[inline]
@@ -153,13 +172,23 @@ impl EdgeWorld {
 
     #[inline]
     fn z_carry(&self, carrying: u8) -> u64 {
-        let slot = if carrying == EnvMeta::CARRYING_NOTHING { 0 } else { carrying as usize + 1 };
-        self.zobrist[self.layout().cells.len() * sim::object::NUM_OBJECTS + slot.min(CARRY_SLOTS - 1)]
+        let slot = if carrying == EnvMeta::CARRYING_NOTHING {
+            0
+        } else {
+            carrying as usize + 1
+        };
+        self.zobrist
+            [self.layout().cells.len() * sim::object::NUM_OBJECTS + slot.min(CARRY_SLOTS - 1)]
     }
 
     /// Hash of the initial world.
     fn initial_hash(&self) -> u64 {
-        let cells = self.template.grid().iter().enumerate().fold(0, |h, (i, &c)| h ^ self.z_cell(i, c));
+        let cells = self
+            .template
+            .grid()
+            .iter()
+            .enumerate()
+            .fold(0, |h, (i, &c)| h ^ self.z_cell(i, c));
         cells ^ self.z_carry(EnvMeta::CARRYING_NOTHING)
     }
 
@@ -182,7 +211,8 @@ impl EdgeWorld {
             out[n] = action::PICKUP;
             n += 1;
         }
-        if obj == Object::DoorClosed || (obj == Object::DoorLocked && carrying == Some(Object::Key)) {
+        if obj == Object::DoorClosed || (obj == Object::DoorLocked && carrying == Some(Object::Key))
+        {
             out[n] = action::TOGGLE;
             n += 1;
         }
@@ -194,7 +224,9 @@ impl EdgeWorld {
     #[inline]
     fn step(&self, env: &mut Env, a: u8, hash: u64) -> (EnvMeta, u64) {
         let pose = env.pose();
-        let front = CellIdx::of_pose(pose, self.layout().width).step(pose.dir, self.layout()).index();
+        let front = CellIdx::of_pose(pose, self.layout().width)
+            .step(pose.dir, self.layout())
+            .index();
         let (before, carried) = (env.grid()[front], carry_code(env));
         let meta = env.step_meta(a);
         let after = env.grid()[front];
@@ -216,7 +248,8 @@ impl EdgeWorld {
 
 #[inline]
 fn carry_code(env: &Env) -> u8 {
-    env.carrying().map_or(EnvMeta::CARRYING_NOTHING, |o| o as u8)
+    env.carrying()
+        .map_or(EnvMeta::CARRYING_NOTHING, |o| o as u8)
 }
 
 /// Reusable buffers of one thread's walks.
@@ -248,7 +281,15 @@ impl WalkScratch {
 
 /// One random walk from node `p` facing `dir`; returns the node it reached
 /// (its loop-erased path is left in `s`).
-fn walk(world: &EdgeWorld, p: NodeId, dir: u8, len: u32, rng: &mut SmallRng, s: &mut WalkScratch, h0: u64) -> Option<NodeId> {
+fn walk(
+    world: &EdgeWorld,
+    p: NodeId,
+    dir: u8,
+    len: u32,
+    rng: &mut SmallRng,
+    s: &mut WalkScratch,
+    h0: u64,
+) -> Option<NodeId> {
     if s.dirty {
         s.env = world.template.clone();
         s.dirty = false;
@@ -304,7 +345,10 @@ fn walk(world: &EdgeWorld, p: NodeId, dir: u8, len: u32, rng: &mut SmallRng, s: 
 /// instead (every edge the walks could ever find, at its shortest).
 pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
     if cfg.edge_search == EdgeSearch::Exhaustive {
-        let per_node: Vec<Vec<EdgePath>> = (0..world.nodes.len()).into_par_iter().map(|i| exhaustive_edges_from(world, NodeId(i as u16))).collect();
+        let per_node: Vec<Vec<EdgePath>> = (0..world.nodes.len())
+            .into_par_iter()
+            .map(|i| exhaustive_edges_from(world, NodeId(i as u16)))
+            .collect();
         return per_node.into_iter().flatten().collect();
     }
     let h0 = world.initial_hash();
@@ -325,7 +369,9 @@ pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
                 s.dirty = false;
                 for w in 0..cfg.walks_per_node {
                     let dir = (w % 4) as u8;
-                    let Some(q) = walk(world, p, dir, cfg.walk_len, &mut rng, s, h0) else { continue };
+                    let Some(q) = walk(world, p, dir, cfg.walk_len, &mut rng, s, h0) else {
+                        continue;
+                    };
                     match best.iter_mut().find(|e| e.to == q) {
                         Some(e) if e.actions.len() <= s.actions.len() => {}
                         Some(e) => {
@@ -333,7 +379,13 @@ pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
                             e.actions.clone_from(&s.actions);
                             e.cells.clone_from(&s.cells);
                         }
-                        None => best.push(EdgePath { from: p, to: q, start_dir: dir, actions: s.actions.clone(), cells: s.cells.clone() }),
+                        None => best.push(EdgePath {
+                            from: p,
+                            to: q,
+                            start_dir: dir,
+                            actions: s.actions.clone(),
+                            cells: s.cells.clone(),
+                        }),
                     }
                 }
                 best.sort_unstable_by_key(|e| e.to);
@@ -342,7 +394,11 @@ pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
         )
         .collect();
     let edges: Vec<EdgePath> = per_node.into_iter().flatten().collect();
-    if cfg.shorten { edges.par_iter().map(|e| shorten_edge(world, e)).collect() } else { edges }
+    if cfg.shorten {
+        edges.par_iter().map(|e| shorten_edge(world, e)).collect()
+    } else {
+        edges
+    }
 }
 
 /// The edge `from → to` with its path replaced by an exact shortest one
@@ -384,7 +440,9 @@ pub fn exhaustive_edges_from(world: &EdgeWorld, from: NodeId) -> Vec<EdgePath> {
 fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<EdgePath> {
     let mut found = Vec::new();
     let width = world.layout().width;
-    let Some(&from_cell) = world.nodes.get(from.index()) else { return found };
+    let Some(&from_cell) = world.nodes.get(from.index()) else {
+        return found;
+    };
     if world.layout().cells[from_cell.index()] == Object::Exit as u8 {
         return found;
     }
@@ -416,7 +474,13 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
                 }
                 actions.reverse();
                 cells.reverse();
-                found.push(EdgePath { from, to: q, start_dir: (states[i].0 % 4) as u8, actions, cells });
+                found.push(EdgePath {
+                    from,
+                    to: q,
+                    start_dir: (states[i].0 % 4) as u8,
+                    actions,
+                    cells,
+                });
                 if target.is_some() {
                     return found;
                 }
@@ -433,7 +497,10 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
         for &a in &choices[..n] {
             // Actions that may change the world step a copy; the others
             // reuse the world's environment (teleported back each time).
-            let changes = a == action::PICKUP || a == action::TOGGLE || (a == action::FORWARD && worlds[wi as usize].1.grid()[front] == Object::Ball as u8);
+            let changes = a == action::PICKUP
+                || a == action::TOGGLE
+                || (a == action::FORWARD
+                    && worlds[wi as usize].1.grid()[front] == Object::Ball as u8);
             let (meta, h, env_after) = if changes {
                 let mut e = worlds[wi as usize].1.clone();
                 e.teleport(pose);
@@ -473,10 +540,20 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
 pub fn check_edge_path(world: &EdgeWorld, edge: &EdgePath) -> Result<(), String> {
     let n = world.nodes.len();
     if edge.from.index() >= n || edge.to.index() >= n || edge.from == edge.to {
-        return Err(format!("edge {} -> {} does not join two distinct nodes of {n}", edge.from, edge.to));
+        return Err(format!(
+            "edge {} -> {} does not join two distinct nodes of {n}",
+            edge.from, edge.to
+        ));
     }
     if edge.actions.is_empty() || edge.actions.len() != edge.cells.len() || edge.start_dir > 3 {
-        return Err(format!("edge {} -> {}: {} actions, {} cells, start_dir {}", edge.from, edge.to, edge.actions.len(), edge.cells.len(), edge.start_dir));
+        return Err(format!(
+            "edge {} -> {}: {} actions, {} cells, start_dir {}",
+            edge.from,
+            edge.to,
+            edge.actions.len(),
+            edge.cells.len(),
+            edge.start_dir
+        ));
     }
     let mut env = world.template.clone();
     env.teleport(world.nodes[edge.from.index()].pose(world.layout().width, edge.start_dir));
@@ -484,19 +561,33 @@ pub fn check_edge_path(world: &EdgeWorld, edge: &EdgePath) -> Result<(), String>
         let meta = env.step_meta(a);
         let cell = CellIdx(world.pose_id(&meta) / 4);
         if cell != c {
-            return Err(format!("edge {} -> {}: action {i} leads to {cell}, the path says {c}", edge.from, edge.to));
+            return Err(format!(
+                "edge {} -> {}: action {i} leads to {cell}, the path says {c}",
+                edge.from, edge.to
+            ));
         }
         let last = i + 1 == edge.actions.len();
         match world.node_at(cell) {
             Some(q) if q == edge.to && last => return Ok(()),
-            Some(q) if q != edge.from => return Err(format!("edge {} -> {}: action {i} touches the third node {q}", edge.from, edge.to)),
+            Some(q) if q != edge.from => {
+                return Err(format!(
+                    "edge {} -> {}: action {i} touches the third node {q}",
+                    edge.from, edge.to
+                ));
+            }
             _ => {}
         }
         if meta.flags & flags::TERMINATED != 0 {
-            return Err(format!("edge {} -> {}: the episode ends at action {i}", edge.from, edge.to));
+            return Err(format!(
+                "edge {} -> {}: the episode ends at action {i}",
+                edge.from, edge.to
+            ));
         }
     }
-    Err(format!("edge {} -> {}: the path does not end on {}", edge.from, edge.to, edge.to))
+    Err(format!(
+        "edge {} -> {}: the path does not end on {}",
+        edge.from, edge.to, edge.to
+    ))
 }
 
 #[cfg(test)]
@@ -513,22 +604,41 @@ mod tests {
     }
 
     fn cfg(walks: u32) -> PlannerConfig {
-        PlannerConfig { walks_per_node: walks, walk_len: 200, ..PlannerConfig::default() }
+        PlannerConfig {
+            walks_per_node: walks,
+            walk_len: 200,
+            ..PlannerConfig::default()
+        }
     }
 
     #[test]
     fn corridor_gives_edges_between_neighbours_only() {
         let l = layout("##########\n#>......E#\n##########\n");
-        let nodes = check_nodes(&l, &[cell(&l, 1, 1), cell(&l, 4, 1), cell(&l, 7, 1)]).expect("nodes");
+        let nodes =
+            check_nodes(&l, &[cell(&l, 1, 1), cell(&l, 4, 1), cell(&l, 7, 1)]).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
         let edges = discover_edges(&w, &cfg(64));
-        let pairs: Vec<(u16, u16, u32)> = edges.iter().map(|e| (e.from.0, e.to.0, e.weight())).collect();
+        let pairs: Vec<(u16, u16, u32)> = edges
+            .iter()
+            .map(|e| (e.from.0, e.to.0, e.weight()))
+            .collect();
         // 0↔1 and 1↔2 (3 cells apart: 3 forwards after facing the right way); never 0→2.
         assert_eq!(pairs, vec![(0, 1, 3), (1, 0, 3), (1, 2, 3), (2, 1, 3)]);
-        let all = discover_edges(&w, &PlannerConfig { edge_search: EdgeSearch::Exhaustive, ..cfg(1) });
-        let all: Vec<(u16, u16, u32)> = all.iter().map(|e| (e.from.0, e.to.0, e.weight())).collect();
+        let all = discover_edges(
+            &w,
+            &PlannerConfig {
+                edge_search: EdgeSearch::Exhaustive,
+                ..cfg(1)
+            },
+        );
+        let all: Vec<(u16, u16, u32)> =
+            all.iter().map(|e| (e.from.0, e.to.0, e.weight())).collect();
         assert_eq!(all, pairs);
-        assert!(edges.iter().all(|e| e.cells.last() == Some(&nodes[e.to.index()])));
+        assert!(
+            edges
+                .iter()
+                .all(|e| e.cells.last() == Some(&nodes[e.to.index()]))
+        );
     }
 
     #[test]
@@ -537,8 +647,14 @@ mod tests {
         let nodes = check_nodes(&l, &[cell(&l, 2, 1), cell(&l, 4, 1)]).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
         let edges = discover_edges(&w, &cfg(64));
-        let e = edges.iter().find(|e| (e.from.0, e.to.0) == (0, 1)).expect("edge through the closed door");
-        assert_eq!(e.actions, vec![action::TOGGLE, action::FORWARD, action::FORWARD]);
+        let e = edges
+            .iter()
+            .find(|e| (e.from.0, e.to.0) == (0, 1))
+            .expect("edge through the closed door");
+        assert_eq!(
+            e.actions,
+            vec![action::TOGGLE, action::FORWARD, action::FORWARD]
+        );
         assert_eq!(e.start_dir, 0);
         assert!(e.changes_world());
     }
@@ -556,8 +672,15 @@ mod tests {
         let nodes = check_nodes(&l, &[cell(&l, 2, 1), cell(&l, 4, 1)]).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
         let edges = discover_edges(&w, &cfg(2048));
-        let e = edges.iter().find(|e| (e.from.0, e.to.0) == (0, 1)).expect("edge through the unlocked door");
-        assert!(e.actions.contains(&action::PICKUP) && e.actions.contains(&action::TOGGLE), "{:?}", e.actions);
+        let e = edges
+            .iter()
+            .find(|e| (e.from.0, e.to.0) == (0, 1))
+            .expect("edge through the unlocked door");
+        assert!(
+            e.actions.contains(&action::PICKUP) && e.actions.contains(&action::TOGGLE),
+            "{:?}",
+            e.actions
+        );
         // Nothing leads back: the node beyond the door has a path back only once
         // the door is open, which its walks (from the initial world) never see.
         assert!(!edges.iter().any(|e| (e.from.0, e.to.0) == (1, 0)));
@@ -570,12 +693,26 @@ mod tests {
             let nodes = crate::pivotal::v_rand(&l, 20, 8).expect("nodes");
             let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
             let walks = discover_edges(&w, &cfg(256));
-            let all = discover_edges(&w, &PlannerConfig { edge_search: EdgeSearch::Exhaustive, ..cfg(1) });
+            let all = discover_edges(
+                &w,
+                &PlannerConfig {
+                    edge_search: EdgeSearch::Exhaustive,
+                    ..cfg(1)
+                },
+            );
             // Walks mostly meet the nearest nodes first; the search finds every
             // pair joined by some path around the other nodes.
-            assert!(!walks.is_empty() && walks.len() <= all.len(), "{} of {}", walks.len(), all.len());
+            assert!(
+                !walks.is_empty() && walks.len() <= all.len(),
+                "{} of {}",
+                walks.len(),
+                all.len()
+            );
             for e in &walks {
-                let x = all.iter().find(|x| (x.from, x.to) == (e.from, e.to)).expect("a walk edge is a possible edge");
+                let x = all
+                    .iter()
+                    .find(|x| (x.from, x.to) == (e.from, e.to))
+                    .expect("a walk edge is a possible edge");
                 assert_eq!(x.weight(), e.weight(), "{} -> {}", e.from, e.to);
             }
             for e in &all {
@@ -590,14 +727,35 @@ mod tests {
         let nodes = crate::pivotal::v_rand(&l, 12, 5).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::DoorKey);
         for shorten in [false, true] {
-            let c = PlannerConfig { shorten, ..cfg(128) };
-            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| discover_edges(&w, &c));
-            let many = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool").install(|| discover_edges(&w, &c));
+            let c = PlannerConfig {
+                shorten,
+                ..cfg(128)
+            };
+            let one = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .expect("pool")
+                .install(|| discover_edges(&w, &c));
+            let many = rayon::ThreadPoolBuilder::new()
+                .num_threads(4)
+                .build()
+                .expect("pool")
+                .install(|| discover_edges(&w, &c));
             assert_eq!(one, many);
             assert!(!one.is_empty());
             if !shorten {
                 // Raw walk paths depend on the seed (shortened ones are exact).
-                assert_ne!(one, discover_edges(&w, &PlannerConfig { seed: 1, ..c.clone() }), "the seed matters");
+                assert_ne!(
+                    one,
+                    discover_edges(
+                        &w,
+                        &PlannerConfig {
+                            seed: 1,
+                            ..c.clone()
+                        }
+                    ),
+                    "the seed matters"
+                );
             }
         }
     }
@@ -607,13 +765,28 @@ mod tests {
         let l = sim::Maze::Small.layout(false);
         let nodes = crate::pivotal::v_rand(&l, 8, 1).expect("nodes");
         let w = EdgeWorld::new(&l, &nodes, Task::MultiGoal);
-        let raw = discover_edges(&w, &PlannerConfig { shorten: false, ..cfg(256) });
+        let raw = discover_edges(
+            &w,
+            &PlannerConfig {
+                shorten: false,
+                ..cfg(256)
+            },
+        );
         for e in &raw {
             let s = shorten_edge(&w, e);
             assert!(s.weight() <= e.weight());
             assert_eq!((s.from, s.to), (e.from, e.to));
-            assert_eq!(s.weight(), shortest_edge_path(&w, e.from, e.to).expect("reachable").weight());
-            assert!(s.cells[..s.cells.len() - 1].iter().all(|&c| w.node_at(c).is_none_or(|n| n == e.from)));
+            assert_eq!(
+                s.weight(),
+                shortest_edge_path(&w, e.from, e.to)
+                    .expect("reachable")
+                    .weight()
+            );
+            assert!(
+                s.cells[..s.cells.len() - 1]
+                    .iter()
+                    .all(|&c| w.node_at(c).is_none_or(|n| n == e.from))
+            );
         }
     }
 }

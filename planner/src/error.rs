@@ -60,7 +60,9 @@ pub enum PlannerError {
         y: u16,
     },
     /// More random nodes (`V_rand`) were asked for than there are cells.
-    #[error("asked for {requested} random nodes but the maze has only {available} cells an agent can stand on")]
+    #[error(
+        "asked for {requested} random nodes but the maze has only {available} cells an agent can stand on"
+    )]
     NotEnoughCells {
         /// Nodes asked for.
         requested: usize,

@@ -49,7 +49,10 @@ pub fn v_all(layout: &Layout) -> Vec<CellIdx> {
 pub fn v_rand(layout: &Layout, k: usize, seed: u64) -> Result<Vec<CellIdx>, PlannerError> {
     let mut all = v_all(layout);
     if k > all.len() {
-        return Err(PlannerError::NotEnoughCells { requested: k, available: all.len() });
+        return Err(PlannerError::NotEnoughCells {
+            requested: k,
+            available: all.len(),
+        });
     }
     let mut rng = SmallRng::seed_from_u64(sim::env_seed(seed, 0x0056_5241_4e44)); // "VRAND"
     let (chosen, _) = all.partial_shuffle(&mut rng, k);
@@ -65,13 +68,21 @@ pub fn v_rand(layout: &Layout, k: usize, seed: u64) -> Result<Vec<CellIdx>, Plan
 /// on are skipped, so the result always passes [`check_nodes`].
 pub fn select_pivotal(layout: &Layout, scored: &[(CellIdx, f32)], fraction: f32) -> Vec<CellIdx> {
     let standable = standable_mask(layout);
-    let mut s: Vec<(CellIdx, f32)> =
-        scored.iter().copied().filter(|(c, v)| standable.get(c.index()).copied().unwrap_or(false) && v.is_finite()).collect();
+    let mut s: Vec<(CellIdx, f32)> = scored
+        .iter()
+        .copied()
+        .filter(|(c, v)| standable.get(c.index()).copied().unwrap_or(false) && v.is_finite())
+        .collect();
     s.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
     s.dedup_by_key(|(c, _)| *c);
     // Rounded up, at least one: the learner's `pivotal_states` counts the same way.
-    let keep = ((s.len() as f64 * f64::from(fraction.clamp(0.0, 1.0))).ceil() as usize).max(usize::from(!s.is_empty()));
-    let mut cells: Vec<CellIdx> = s.into_iter().take(keep.min(MAX_NODES)).map(|(c, _)| c).collect();
+    let keep = ((s.len() as f64 * f64::from(fraction.clamp(0.0, 1.0))).ceil() as usize)
+        .max(usize::from(!s.is_empty()));
+    let mut cells: Vec<CellIdx> = s
+        .into_iter()
+        .take(keep.min(MAX_NODES))
+        .map(|(c, _)| c)
+        .collect();
     cells.sort_unstable();
     cells
 }
@@ -107,7 +118,10 @@ fn standable_mask(layout: &Layout) -> Vec<bool> {
 /// `cells[i]`).
 pub fn check_nodes(layout: &Layout, cells: &[CellIdx]) -> Result<Vec<CellIdx>, PlannerError> {
     if cells.len() > MAX_NODES {
-        return Err(PlannerError::TooManyNodes { count: cells.len(), max: MAX_NODES });
+        return Err(PlannerError::TooManyNodes {
+            count: cells.len(),
+            max: MAX_NODES,
+        });
     }
     let standable = standable_mask(layout);
     let mut seen = vec![false; layout.cells.len()];
@@ -146,8 +160,16 @@ pub fn check_nodes(layout: &Layout, cells: &[CellIdx]) -> Result<Vec<CellIdx>, P
 /// `x` is the column from the left, `y` the row from the top (as in the
 /// layout files). `source` names the input in errors, which give the
 /// 1-based line. The cells are then checked with [`check_nodes`].
-pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<CellIdx>, PlannerError> {
-    let err = |line: usize, message: String| PlannerError::NodeList { source_name: source.to_string(), line, message };
+pub fn parse_node_list(
+    layout: &Layout,
+    source: &str,
+    text: &str,
+) -> Result<Vec<CellIdx>, PlannerError> {
+    let err = |line: usize, message: String| PlannerError::NodeList {
+        source_name: source.to_string(),
+        line,
+        message,
+    };
     let trimmed = text.trim_start();
     let pairs: Vec<ListedCell> = if trimmed.starts_with('[') || trimmed.starts_with('{') {
         parse_json_pairs(text).map_err(|(line, m)| err(line, m))?
@@ -158,11 +180,20 @@ pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<
             if line.is_empty() || line.starts_with('#') {
                 continue;
             }
-            let fields: Vec<&str> = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|f| !f.is_empty()).collect();
+            let fields: Vec<&str> = line
+                .split(|c: char| c == ',' || c.is_whitespace())
+                .filter(|f| !f.is_empty())
+                .collect();
             let [xs, ys] = fields[..] else {
-                return Err(err(n + 1, format!("expected two integers \"x,y\", found {line:?}")));
+                return Err(err(
+                    n + 1,
+                    format!("expected two integers \"x,y\", found {line:?}"),
+                ));
             };
-            let num = |f: &str, what| f.parse::<i64>().map_err(|_| err(n + 1, format!("{what} {f:?} is not an integer")));
+            let num = |f: &str, what| {
+                f.parse::<i64>()
+                    .map_err(|_| err(n + 1, format!("{what} {f:?} is not an integer")))
+            };
             pairs.push((num(xs, "x")?, num(ys, "y")?, n + 1));
         }
         pairs
@@ -173,7 +204,12 @@ pub fn parse_node_list(layout: &Layout, source: &str, text: &str) -> Result<Vec<
     let mut cells = Vec::with_capacity(pairs.len());
     for &(x, y, line) in &pairs {
         if x < 0 || y < 0 || x as usize >= layout.width || y as usize >= layout.height {
-            let e = PlannerError::OutOfGrid { x, y, width: layout.width, height: layout.height };
+            let e = PlannerError::OutOfGrid {
+                x,
+                y,
+                width: layout.width,
+                height: layout.height,
+            };
             return Err(err(line, e.to_string()));
         }
         cells.push(CellIdx::from_xy(x as usize, y as usize, layout.width));
@@ -199,7 +235,8 @@ type ListedCell = (i64, i64, usize);
 /// The cells of a JSON node list (line 0: JSON values carry no line);
 /// errors as `(line, message)`.
 fn parse_json_pairs(text: &str) -> Result<Vec<ListedCell>, (usize, String)> {
-    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| (e.line(), format!("invalid JSON: {e}")))?;
+    let value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| (e.line(), format!("invalid JSON: {e}")))?;
     let list = match &value {
         serde_json::Value::Array(a) => a,
         serde_json::Value::Object(o) => match o.get("nodes") {
@@ -209,27 +246,42 @@ fn parse_json_pairs(text: &str) -> Result<Vec<ListedCell>, (usize, String)> {
         _ => return Err((0, "expected a JSON array of [x, y] pairs".into())),
     };
     let int = |v: Option<&serde_json::Value>, i: usize, what: &str| {
-        v.and_then(serde_json::Value::as_i64).ok_or_else(|| (0, format!("entry {i}: {what} missing or not an integer")))
+        v.and_then(serde_json::Value::as_i64)
+            .ok_or_else(|| (0, format!("entry {i}: {what} missing or not an integer")))
     };
     list.iter()
         .enumerate()
         .map(|(i, v)| match v {
-            serde_json::Value::Array(p) if p.len() == 2 => Ok((int(p.first(), i, "x")?, int(p.get(1), i, "y")?, 0)),
-            serde_json::Value::Object(o) => Ok((int(o.get("x"), i, "x")?, int(o.get("y"), i, "y")?, 0)),
-            _ => Err((0, format!("entry {i}: expected [x, y] or {{\"x\": .., \"y\": ..}}, found {v}"))),
+            serde_json::Value::Array(p) if p.len() == 2 => {
+                Ok((int(p.first(), i, "x")?, int(p.get(1), i, "y")?, 0))
+            }
+            serde_json::Value::Object(o) => {
+                Ok((int(o.get("x"), i, "x")?, int(o.get("y"), i, "y")?, 0))
+            }
+            _ => Err((
+                0,
+                format!("entry {i}: expected [x, y] or {{\"x\": .., \"y\": ..}}, found {v}"),
+            )),
         })
         .collect()
 }
 
 /// Reads a node list file ([`parse_node_list`]).
 pub fn read_node_file(layout: &Layout, path: &Path) -> Result<Vec<CellIdx>, PlannerError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PlannerError::Io { path: path.display().to_string(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|source| PlannerError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
     parse_node_list(layout, &path.display().to_string(), &text)
 }
 
 /// The node cells a configuration asks for. `given` supplies the cells of
 /// [`CandidateSet::Given`] (and is ignored otherwise).
-pub fn candidates(layout: &Layout, cfg: &PlannerConfig, given: &[CellIdx]) -> Result<Vec<CellIdx>, PlannerError> {
+pub fn candidates(
+    layout: &Layout,
+    cfg: &PlannerConfig,
+    given: &[CellIdx],
+) -> Result<Vec<CellIdx>, PlannerError> {
     match &cfg.candidates {
         CandidateSet::Random { k } => v_rand(layout, *k, cfg.seed),
         CandidateSet::All => check_nodes(layout, &v_all(layout)),
@@ -251,49 +303,86 @@ mod tests {
     fn v_all_holds_only_standable_cells_and_v_rand_is_seeded() {
         let l = small();
         let all = v_all(&l);
-        assert!(all.iter().all(|c| is_node_object(Object::from_code(l.cells[c.index()]).expect("valid code"))));
-        let key = l.cells.iter().position(|&c| c == Object::Key as u8).expect("door-key maze has a key");
+        assert!(
+            all.iter().all(|c| is_node_object(
+                Object::from_code(l.cells[c.index()]).expect("valid code")
+            ))
+        );
+        let key = l
+            .cells
+            .iter()
+            .position(|&c| c == Object::Key as u8)
+            .expect("door-key maze has a key");
         assert!(!all.contains(&CellIdx(key as u32)));
         let a = v_rand(&l, 10, 3).expect("enough cells");
         assert_eq!(a, v_rand(&l, 10, 3).expect("enough cells"));
         assert_ne!(a, v_rand(&l, 10, 4).expect("enough cells"));
         assert_eq!(a.len(), 10);
         assert!(a.windows(2).all(|w| w[0] < w[1]));
-        assert!(matches!(v_rand(&l, all.len() + 1, 0), Err(PlannerError::NotEnoughCells { .. })));
+        assert!(matches!(
+            v_rand(&l, all.len() + 1, 0),
+            Err(PlannerError::NotEnoughCells { .. })
+        ));
     }
 
     #[test]
     fn node_lists_parse_as_text_and_json() {
         let l = small();
         let text = "# doorways\n1,1\n\n 2 3 \n";
-        let want = vec![CellIdx::from_xy(1, 1, l.width), CellIdx::from_xy(2, 3, l.width)];
+        let want = vec![
+            CellIdx::from_xy(1, 1, l.width),
+            CellIdx::from_xy(2, 3, l.width),
+        ];
         assert_eq!(parse_node_list(&l, "t", text).expect("text"), want);
-        assert_eq!(parse_node_list(&l, "j", "[[1,1],[2,3]]").expect("pairs"), want);
-        assert_eq!(parse_node_list(&l, "j", r#"{"nodes":[{"x":1,"y":1},{"x":2,"y":3}]}"#).expect("objects"), want);
+        assert_eq!(
+            parse_node_list(&l, "j", "[[1,1],[2,3]]").expect("pairs"),
+            want
+        );
+        assert_eq!(
+            parse_node_list(&l, "j", r#"{"nodes":[{"x":1,"y":1},{"x":2,"y":3}]}"#)
+                .expect("objects"),
+            want
+        );
     }
 
     #[test]
     fn node_list_errors_name_the_line_and_the_problem() {
         let l = small();
-        let msg = |t: &str| parse_node_list(&l, "nodes.txt", t).expect_err("must be refused").to_string();
+        let msg = |t: &str| {
+            parse_node_list(&l, "nodes.txt", t)
+                .expect_err("must be refused")
+                .to_string()
+        };
         let e = msg("1,1\n2,x\n");
-        assert!(e.contains("nodes.txt:2") && e.contains("not an integer"), "{e}");
+        assert!(
+            e.contains("nodes.txt:2") && e.contains("not an integer"),
+            "{e}"
+        );
         let e = msg("1,1\n1 2 3\n");
-        assert!(e.contains("nodes.txt:2") && e.contains("two integers"), "{e}");
+        assert!(
+            e.contains("nodes.txt:2") && e.contains("two integers"),
+            "{e}"
+        );
         let e = msg("1,1\n0,0\n");
         assert!(e.contains("nodes.txt:2") && e.contains("wall"), "{e}");
         let e = msg("1,1\n99,1\n");
         assert!(e.contains("nodes.txt:2") && e.contains("outside"), "{e}");
         let e = msg("1,1\n2,2\n1,1\n");
         assert!(e.contains("nodes.txt:3") && e.contains("twice"), "{e}");
-        let key = l.cells.iter().position(|&c| c == Object::Key as u8).expect("key");
+        let key = l
+            .cells
+            .iter()
+            .position(|&c| c == Object::Key as u8)
+            .expect("key");
         let e = msg(&format!("{},{}\n", key % l.width, key / l.width));
         assert!(e.contains("key"), "{e}");
         assert!(msg("# nothing\n").contains("empty"));
         assert!(msg("[[1,1],[2]]").contains("entry 1"));
         assert!(msg("[[1,1],").contains("invalid JSON"));
         assert!(msg("{\"cells\": []}").contains("\"nodes\""));
-        let missing = read_node_file(&l, Path::new("/nonexistent/nodes.txt")).expect_err("no file").to_string();
+        let missing = read_node_file(&l, Path::new("/nonexistent/nodes.txt"))
+            .expect_err("no file")
+            .to_string();
         assert!(missing.contains("/nonexistent/nodes.txt"), "{missing}");
     }
 
@@ -301,7 +390,11 @@ mod tests {
     fn select_pivotal_keeps_the_top_fraction() {
         let l = small();
         let all = v_all(&l);
-        let scored: Vec<(CellIdx, f32)> = all.iter().enumerate().map(|(i, &c)| (c, i as f32)).collect();
+        let scored: Vec<(CellIdx, f32)> = all
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (c, i as f32))
+            .collect();
         let p = select_pivotal(&l, &scored, 0.2);
         assert_eq!(p.len(), (all.len() as f64 * 0.2).ceil() as usize);
         assert!(p.iter().all(|c| all[all.len() - p.len()..].contains(c)));
@@ -312,9 +405,16 @@ mod tests {
     #[test]
     fn raw_cells_become_valid_nodes() {
         let l = small();
-        let key = l.cells.iter().position(|&c| c == Object::Key as u8).expect("key") as u32;
+        let key = l
+            .cells
+            .iter()
+            .position(|&c| c == Object::Key as u8)
+            .expect("key") as u32;
         let a = CellIdx::from_xy(1, 1, l.width).0;
         let b = CellIdx::from_xy(2, 1, l.width).0;
-        assert_eq!(nodes_from_cells(&l, &[b, key, 0, a, b, 10_000]), vec![CellIdx(b), CellIdx(a)]);
+        assert_eq!(
+            nodes_from_cells(&l, &[b, key, 0, a, b, 10_000]),
+            vec![CellIdx(b), CellIdx(a)]
+        );
     }
 }

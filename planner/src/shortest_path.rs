@@ -48,7 +48,10 @@ impl ShortestPaths {
     /// Runs Floyd–Warshall over `n` nodes and the directed, weighted
     /// `edges` `(from, to, weight)`. Self-loops are ignored; of parallel
     /// edges the lightest counts. `n` must be below `u16::MAX`.
-    pub fn floyd_warshall(n: usize, edges: impl IntoIterator<Item = (NodeId, NodeId, u32)>) -> ShortestPaths {
+    pub fn floyd_warshall(
+        n: usize,
+        edges: impl IntoIterator<Item = (NodeId, NodeId, u32)>,
+    ) -> ShortestPaths {
         debug_assert!(n < NO_HOP as usize);
         let mut dist = vec![UNREACHABLE; n * n];
         let mut next = vec![NO_HOP; n * n];
@@ -81,7 +84,9 @@ impl ShortestPaths {
                 }
             };
             if n >= PARALLEL_MIN_NODES {
-                dist.par_chunks_mut(n).zip(next.par_chunks_mut(n)).for_each(relax);
+                dist.par_chunks_mut(n)
+                    .zip(next.par_chunks_mut(n))
+                    .for_each(relax);
             } else {
                 dist.chunks_mut(n).zip(next.chunks_mut(n)).for_each(relax);
             }
@@ -99,7 +104,11 @@ impl ShortestPaths {
     /// [`UNREACHABLE`]. Ids out of range are unreachable.
     #[inline]
     pub fn dist(&self, a: NodeId, b: NodeId) -> u32 {
-        if a.index() < self.n && b.index() < self.n { self.dist[a.index() * self.n + b.index()] } else { UNREACHABLE }
+        if a.index() < self.n && b.index() < self.n {
+            self.dist[a.index() * self.n + b.index()]
+        } else {
+            UNREACHABLE
+        }
     }
 
     /// First hop after `a` on a shortest path to `b` (`b` itself when the
@@ -175,7 +184,8 @@ mod tests {
 
     fn graph() -> impl Strategy<Value = (usize, Vec<(NodeId, NodeId, u32)>)> {
         (1usize..40).prop_flat_map(|n| {
-            let edge = (0..n, 0..n, 1u32..20).prop_map(|(a, b, w)| (NodeId(a as u16), NodeId(b as u16), w));
+            let edge = (0..n, 0..n, 1u32..20)
+                .prop_map(|(a, b, w)| (NodeId(a as u16), NodeId(b as u16), w));
             (Just(n), proptest::collection::vec(edge, 0..n * 4))
         })
     }
@@ -228,7 +238,11 @@ mod tests {
         let edges: Vec<(NodeId, NodeId, u32)> = (0..n * 3)
             .map(|i| {
                 let r = sim::env_seed(9, i as u64);
-                (NodeId((r % n as u64) as u16), NodeId(((r >> 16) % n as u64) as u16), 1 + ((r >> 32) % 17) as u32)
+                (
+                    NodeId((r % n as u64) as u16),
+                    NodeId(((r >> 16) % n as u64) as u16),
+                    1 + ((r >> 32) % 17) as u32,
+                )
             })
             .collect();
         let many = ShortestPaths::floyd_warshall(n, edges.iter().copied());

@@ -85,7 +85,13 @@ impl Route {
     /// An empty route with room for `actions` actions and `nodes` nodes, so
     /// that queries up to that size allocate nothing.
     pub fn with_capacity(actions: usize, nodes: usize) -> Route {
-        Route { start: None, nodes: Vec::with_capacity(nodes), actions: Vec::with_capacity(actions), cells: Vec::with_capacity(actions), world_after: RouteWorld::default() }
+        Route {
+            start: None,
+            nodes: Vec::with_capacity(nodes),
+            actions: Vec::with_capacity(actions),
+            cells: Vec::with_capacity(actions),
+            world_after: RouteWorld::default(),
+        }
     }
 
     fn clear(&mut self) {
@@ -129,7 +135,12 @@ impl Route {
     /// Copies the route into wire-format arrays (a route response's
     /// `pivots`, `cells` and `actions`) and returns `(num_pivots,
     /// num_actions)`, or `None`, writing nothing, when it does not fit.
-    pub fn write_wire(&self, pivots: &mut [u16], cells: &mut [u32], actions: &mut [u8]) -> Option<(usize, usize)> {
+    pub fn write_wire(
+        &self,
+        pivots: &mut [u16],
+        cells: &mut [u32],
+        actions: &mut [u8],
+    ) -> Option<(usize, usize)> {
         let (np, na) = (self.nodes.len(), self.actions.len());
         if np > pivots.len() || na > cells.len() || na > actions.len() {
             return None;
@@ -181,7 +192,11 @@ impl WorldGraph {
     /// Builds the graph of `layout`: nodes from `cfg.candidates` (`given`
     /// supplies [`crate::CandidateSet::Given`]), edges by random walks, then
     /// the all-pairs shortest paths.
-    pub fn build(layout: &Layout, cfg: &PlannerConfig, given: &[CellIdx]) -> Result<WorldGraph, PlannerError> {
+    pub fn build(
+        layout: &Layout,
+        cfg: &PlannerConfig,
+        given: &[CellIdx],
+    ) -> Result<WorldGraph, PlannerError> {
         cfg.validate()?;
         check_layout(layout)?;
         let nodes = candidates(layout, cfg, given)?;
@@ -193,13 +208,25 @@ impl WorldGraph {
     /// A graph from nodes and edges computed elsewhere (or loaded). The
     /// nodes are checked, and every edge is replayed in the simulator
     /// ([`check_edge_path`]); `source` names the input in errors.
-    pub fn from_parts(layout: &Layout, cfg: &PlannerConfig, nodes: &[CellIdx], mut edges: Vec<EdgePath>, source: &str) -> Result<WorldGraph, PlannerError> {
+    pub fn from_parts(
+        layout: &Layout,
+        cfg: &PlannerConfig,
+        nodes: &[CellIdx],
+        mut edges: Vec<EdgePath>,
+        source: &str,
+    ) -> Result<WorldGraph, PlannerError> {
         check_layout(layout)?;
         let nodes = check_nodes(layout, nodes)?;
         let world = EdgeWorld::new(layout, &nodes, cfg.walk_task());
-        let invalid = |message: String| PlannerError::InvalidGraph { source_name: source.to_string(), message };
+        let invalid = |message: String| PlannerError::InvalidGraph {
+            source_name: source.to_string(),
+            message,
+        };
         edges.sort_by_key(|e| (e.from, e.to));
-        if let Some(w) = edges.windows(2).find(|w| (w[0].from, w[0].to) == (w[1].from, w[1].to)) {
+        if let Some(w) = edges
+            .windows(2)
+            .find(|w| (w[0].from, w[0].to) == (w[1].from, w[1].to))
+        {
             return Err(invalid(format!("two edges {} -> {}", w[0].from, w[0].to)));
         }
         for e in &edges {
@@ -248,12 +275,20 @@ impl WorldGraph {
     /// is strictly shorter and replays in the simulator
     /// ([`check_edge_path`]); the route tables are then rebuilt. Returns how
     /// many edges changed.
-    pub fn refine_edges(&mut self, mut propose: impl FnMut(&EdgePath) -> Option<EdgePath>) -> usize {
+    pub fn refine_edges(
+        &mut self,
+        mut propose: impl FnMut(&EdgePath) -> Option<EdgePath>,
+    ) -> usize {
         let mut changed = 0;
         for k in 0..self.edges.len() {
-            let Some(p) = propose(&self.edges[k]) else { continue };
+            let Some(p) = propose(&self.edges[k]) else {
+                continue;
+            };
             let e = &self.edges[k];
-            if (p.from, p.to) == (e.from, e.to) && p.weight() < e.weight() && check_edge_path(&self.world, &p).is_ok() {
+            if (p.from, p.to) == (e.from, e.to)
+                && p.weight() < e.weight()
+                && check_edge_path(&self.world, &p).is_ok()
+            {
                 self.edges[k] = p;
                 changed += 1;
             }
@@ -269,7 +304,8 @@ impl WorldGraph {
     /// the constructors; public so that its cost can be measured.
     pub fn rebuild_shortest_paths(&mut self) {
         let n = self.num_nodes();
-        self.paths = ShortestPaths::floyd_warshall(n, self.edges.iter().map(|e| (e.from, e.to, e.weight())));
+        self.paths =
+            ShortestPaths::floyd_warshall(n, self.edges.iter().map(|e| (e.from, e.to, e.weight())));
         self.edge_of.clear();
         self.edge_of.resize(n * n, NO_EDGE);
         self.edge_info.clear();
@@ -319,7 +355,8 @@ impl WorldGraph {
         if from.index() >= n || to.index() >= n {
             return None;
         }
-        self.edges.get(self.edge_of[from.index() * n + to.index()] as usize)
+        self.edges
+            .get(self.edge_of[from.index() * n + to.index()] as usize)
     }
     /// The all-pairs tables.
     pub fn shortest_paths(&self) -> &ShortestPaths {
@@ -343,7 +380,10 @@ impl WorldGraph {
     /// (`EnvMeta::carrying`). Routes planned from it are executable when
     /// the hands hold nothing or the key.
     pub fn observe_world(&self, grid: &[u8], carrying: u8) -> RouteWorld {
-        let mut w = RouteWorld { open_doors: 0, carrying_key: carrying == Object::Key as u8 };
+        let mut w = RouteWorld {
+            open_doors: 0,
+            carrying_key: carrying == Object::Key as u8,
+        };
         for (k, c) in self.door_cells.iter().enumerate() {
             if grid.get(c.index()) == Some(&(Object::DoorOpen as u8)) {
                 w.open_doors |= 1 << k;
@@ -353,14 +393,27 @@ impl WorldGraph {
     }
 
     fn check_node(&self, node: NodeId) -> Result<(), PlannerError> {
-        if node.index() < self.num_nodes() { Ok(()) } else { Err(PlannerError::UnknownNode { node, num_nodes: self.num_nodes() }) }
+        if node.index() < self.num_nodes() {
+            Ok(())
+        } else {
+            Err(PlannerError::UnknownNode {
+                node,
+                num_nodes: self.num_nodes(),
+            })
+        }
     }
 
     /// Plans the route from node `from`, standing there facing `facing`, to
     /// node `to`, in the layout's initial world, into `out`; returns its
     /// action count. See [`WorldGraph::route_in_world_into`].
     #[inline]
-    pub fn route_into(&self, from: NodeId, facing: u8, to: NodeId, out: &mut Route) -> Result<usize, PlannerError> {
+    pub fn route_into(
+        &self,
+        from: NodeId,
+        facing: u8,
+        to: NodeId,
+        out: &mut Route,
+    ) -> Result<usize, PlannerError> {
         self.route_in_world_into(from, facing, to, self.initial_world, out)
     }
 
@@ -368,7 +421,14 @@ impl WorldGraph {
     /// starting in `world`, into `out` (cleared first); returns its action
     /// count. Errors: an unknown node, or no path in the graph
     /// ([`PlannerError::Unreachable`]). On error `out` is empty.
-    pub fn route_in_world_into(&self, from: NodeId, facing: u8, to: NodeId, world: RouteWorld, out: &mut Route) -> Result<usize, PlannerError> {
+    pub fn route_in_world_into(
+        &self,
+        from: NodeId,
+        facing: u8,
+        to: NodeId,
+        world: RouteWorld,
+        out: &mut Route,
+    ) -> Result<usize, PlannerError> {
         out.clear();
         self.check_node(from)?;
         self.check_node(to)?;
@@ -390,7 +450,9 @@ impl WorldGraph {
         let (mut cur, mut dir) = (from, facing);
         out.nodes.push(from);
         while cur != to {
-            let Some(hop) = self.paths.next_hop(cur, to) else { break };
+            let Some(hop) = self.paths.next_hop(cur, to) else {
+                break;
+            };
             let info = self.edge_info[self.edge_of[cur.index() * n + hop.index()] as usize];
             let here = self.nodes()[cur.index()];
             // Turn to the edge's starting facing: +1 right, +3 left, +2 two rights.
@@ -405,9 +467,17 @@ impl WorldGraph {
             }
             let span = info.start as usize..(info.start + info.len) as usize;
             if info.changes_world {
-                self.replay_changing_edge(&self.flat_actions[span.clone()], &self.flat_cells[span], here, info.start_dir, &mut world, out);
+                self.replay_changing_edge(
+                    &self.flat_actions[span.clone()],
+                    &self.flat_cells[span],
+                    here,
+                    info.start_dir,
+                    &mut world,
+                    out,
+                );
             } else {
-                out.actions.extend_from_slice(&self.flat_actions[span.clone()]);
+                out.actions
+                    .extend_from_slice(&self.flat_actions[span.clone()]);
                 out.cells.extend_from_slice(&self.flat_cells[span]);
             }
             dir = info.end_dir;
@@ -420,7 +490,15 @@ impl WorldGraph {
     /// Copies an edge path that opens doors or picks up the key, leaving out
     /// the toggles of doors already open and the pickups with the key in
     /// hand (module docs, "World changes").
-    fn replay_changing_edge(&self, actions: &[u8], cells: &[CellIdx], start: CellIdx, start_dir: u8, world: &mut RouteWorld, out: &mut Route) {
+    fn replay_changing_edge(
+        &self,
+        actions: &[u8],
+        cells: &[CellIdx],
+        start: CellIdx,
+        start_dir: u8,
+        world: &mut RouteWorld,
+        out: &mut Route,
+    ) {
         let (mut cell, mut dir) = (start, start_dir);
         for (&a, &next) in actions.iter().zip(cells) {
             let keep = match a {
@@ -455,11 +533,20 @@ impl WorldGraph {
     /// route from it. When `pose` is on a node this is
     /// [`WorldGraph::route_in_world_into`]. Errors as there, plus
     /// [`PlannerError::NotOnGraph`] when no node can be reached.
-    pub fn route_from_pose_into(&self, pose: Pose, to: NodeId, world: RouteWorld, out: &mut Route) -> Result<usize, PlannerError> {
+    pub fn route_from_pose_into(
+        &self,
+        pose: Pose,
+        to: NodeId,
+        world: RouteWorld,
+        out: &mut Route,
+    ) -> Result<usize, PlannerError> {
         out.clear();
         self.check_node(to)?;
         let layout = self.layout();
-        let not_on_graph = PlannerError::NotOnGraph { x: pose.x, y: pose.y };
+        let not_on_graph = PlannerError::NotOnGraph {
+            x: pose.x,
+            y: pose.y,
+        };
         if pose.x as usize >= layout.width || pose.y as usize >= layout.height {
             return Err(not_on_graph);
         }
@@ -482,12 +569,19 @@ impl WorldGraph {
                 }
             }
         }
-        let first = self.node_at(cell).ok_or(PlannerError::NotOnGraph { x: pose.x, y: pose.y })?;
+        let first = self.node_at(cell).ok_or(PlannerError::NotOnGraph {
+            x: pose.x,
+            y: pose.y,
+        })?;
         if self.paths.dist(first, to) == UNREACHABLE {
             out.clear();
             return Err(PlannerError::Unreachable { from: first, to });
         }
-        out.start = Some(Pose { x: pose.x, y: pose.y, dir: pose.dir & 3 });
+        out.start = Some(Pose {
+            x: pose.x,
+            y: pose.y,
+            dir: pose.dir & 3,
+        });
         out.world_after = world;
         self.append_route(first, dir, to, out);
         Ok(out.actions.len())
@@ -502,9 +596,22 @@ fn push(out: &mut Route, a: u8, cell: CellIdx) {
 
 /// Refuses layouts whose world changes route replay cannot track.
 fn check_layout(layout: &Layout) -> Result<(), PlannerError> {
-    let keys = layout.cells.iter().filter(|&&c| c == Object::Key as u8).count();
-    let doors = layout.cells.iter().filter(|&&c| Object::from_code(c).is_some_and(Object::is_door)).count();
-    let unsupported = |message| Err(PlannerError::UnsupportedLayout { layout: layout.name.clone(), message });
+    let keys = layout
+        .cells
+        .iter()
+        .filter(|&&c| c == Object::Key as u8)
+        .count();
+    let doors = layout
+        .cells
+        .iter()
+        .filter(|&&c| Object::from_code(c).is_some_and(Object::is_door))
+        .count();
+    let unsupported = |message| {
+        Err(PlannerError::UnsupportedLayout {
+            layout: layout.name.clone(),
+            message,
+        })
+    };
     if keys > 1 {
         return unsupported(format!("{keys} keys; route replay tracks one"));
     }
@@ -615,20 +722,34 @@ impl WorldGraph {
             height: l.height,
             layout: l.to_text().lines().map(str::to_string).collect(),
             config: self.config.clone(),
-            nodes: self.nodes().iter().enumerate().map(|(i, c)| {
-                let (x, y) = c.xy(l.width);
-                NodeRecord { id: NodeId(i as u16), x, y }
-            }).collect(),
-            edges: self.edges.iter().map(|e| EdgeRecord {
-                from: e.from,
-                to: e.to,
-                weight: e.weight(),
-                start_dir: e.start_dir,
-                actions: e.actions.clone(),
-                cells: e.cells.clone(),
-            }).collect(),
+            nodes: self
+                .nodes()
+                .iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    let (x, y) = c.xy(l.width);
+                    NodeRecord {
+                        id: NodeId(i as u16),
+                        x,
+                        y,
+                    }
+                })
+                .collect(),
+            edges: self
+                .edges
+                .iter()
+                .map(|e| EdgeRecord {
+                    from: e.from,
+                    to: e.to,
+                    weight: e.weight(),
+                    start_dir: e.start_dir,
+                    actions: e.actions.clone(),
+                    cells: e.cells.clone(),
+                })
+                .collect(),
         };
-        serde_json::to_string_pretty(&file).expect("invariant: the graph file serialises (plain data, string keys)")
+        serde_json::to_string_pretty(&file)
+            .expect("invariant: the graph file serialises (plain data, string keys)")
     }
 
     /// Reads a graph from [`WorldGraph::to_json`]'s format; `source` names
@@ -636,14 +757,26 @@ impl WorldGraph {
     /// validated, node ids must be `0..n` in order, weights must equal the
     /// path lengths, and every edge path is replayed in the simulator.
     pub fn from_json(source: &str, text: &str) -> Result<WorldGraph, PlannerError> {
-        let file: GraphFile = serde_json::from_str(text).map_err(|e| PlannerError::Json { path: source.to_string(), source: e })?;
-        let invalid = |message: String| PlannerError::InvalidGraph { source_name: source.to_string(), message };
+        let file: GraphFile = serde_json::from_str(text).map_err(|e| PlannerError::Json {
+            path: source.to_string(),
+            source: e,
+        })?;
+        let invalid = |message: String| PlannerError::InvalidGraph {
+            source_name: source.to_string(),
+            message,
+        };
         if file.format != GRAPH_FORMAT {
-            return Err(invalid(format!("format {:?}, expected {GRAPH_FORMAT:?}", file.format)));
+            return Err(invalid(format!(
+                "format {:?}, expected {GRAPH_FORMAT:?}",
+                file.format
+            )));
         }
         let layout = Layout::parse(&file.layout_name, &(file.layout.join("\n") + "\n"))?;
         if (layout.width, layout.height) != (file.width, file.height) {
-            return Err(invalid(format!("the layout is {}x{} but the file says {}x{}", layout.width, layout.height, file.width, file.height)));
+            return Err(invalid(format!(
+                "the layout is {}x{} but the file says {}x{}",
+                layout.width, layout.height, file.width, file.height
+            )));
         }
         let mut nodes = Vec::with_capacity(file.nodes.len());
         for (i, n) in file.nodes.iter().enumerate() {
@@ -651,16 +784,33 @@ impl WorldGraph {
                 return Err(invalid(format!("node {i} has id {}", n.id)));
             }
             if n.x as usize >= layout.width || n.y as usize >= layout.height {
-                return Err(PlannerError::OutOfGrid { x: n.x.into(), y: n.y.into(), width: layout.width, height: layout.height });
+                return Err(PlannerError::OutOfGrid {
+                    x: n.x.into(),
+                    y: n.y.into(),
+                    width: layout.width,
+                    height: layout.height,
+                });
             }
             nodes.push(CellIdx::from_xy(n.x as usize, n.y as usize, layout.width));
         }
         let mut edges = Vec::with_capacity(file.edges.len());
         for e in file.edges {
             if e.weight as usize != e.actions.len() {
-                return Err(invalid(format!("edge {} -> {} has weight {} but {} actions", e.from, e.to, e.weight, e.actions.len())));
+                return Err(invalid(format!(
+                    "edge {} -> {} has weight {} but {} actions",
+                    e.from,
+                    e.to,
+                    e.weight,
+                    e.actions.len()
+                )));
             }
-            edges.push(EdgePath { from: e.from, to: e.to, start_dir: e.start_dir, actions: e.actions, cells: e.cells });
+            edges.push(EdgePath {
+                from: e.from,
+                to: e.to,
+                start_dir: e.start_dir,
+                actions: e.actions,
+                cells: e.cells,
+            });
         }
         file.config.validate()?;
         WorldGraph::from_parts(&layout, &file.config, &nodes, edges, source)
@@ -673,7 +823,10 @@ impl WorldGraph {
 
     /// Loads a graph saved by [`WorldGraph::save`].
     pub fn load(path: &Path) -> Result<WorldGraph, PlannerError> {
-        let text = std::fs::read_to_string(path).map_err(|source| PlannerError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| PlannerError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
         WorldGraph::from_json(&path.display().to_string(), &text)
     }
 
@@ -693,11 +846,20 @@ impl WorldGraph {
             let (x, y) = c.xy(l.width);
             ((x as f32 + 0.5) * s, (y as f32 + 0.5) * s)
         };
-        let (wmin, wmax) = self.edges.iter().fold((u32::MAX, 0), |(lo, hi), e| (lo.min(e.weight()), hi.max(e.weight())));
+        let (wmin, wmax) = self.edges.iter().fold((u32::MAX, 0), |(lo, hi), e| {
+            (lo.min(e.weight()), hi.max(e.weight()))
+        });
         for e in &self.edges {
-            let t = if wmax > wmin { (e.weight() - wmin) as f32 / (wmax - wmin) as f32 } else { 0.0 };
+            let t = if wmax > wmin {
+                (e.weight() - wmin) as f32 / (wmax - wmin) as f32
+            } else {
+                0.0
+            };
             let colour = lerp([20, 50, 170], [150, 175, 225], t);
-            let (a, b) = (centre(self.nodes()[e.from.index()]), centre(self.nodes()[e.to.index()]));
+            let (a, b) = (
+                centre(self.nodes()[e.from.index()]),
+                centre(self.nodes()[e.to.index()]),
+            );
             let (dx, dy) = (b.0 - a.0, b.1 - a.1);
             let len = (dx * dx + dy * dy).sqrt().max(1e-3);
             let (ux, uy) = (dx / len, dy / len);
@@ -707,7 +869,15 @@ impl WorldGraph {
             let tip = (b.0 - ux * s * 0.32, b.1 - uy * s * 0.32);
             let base = (tip.0 - ux * s * 0.3, tip.1 - uy * s * 0.3);
             let side = (-uy * s * 0.14, ux * s * 0.14);
-            canvas.fill_triangle([tip, (base.0 + side.0, base.1 + side.1), (base.0 - side.0, base.1 - side.1)], colour, 0.9);
+            canvas.fill_triangle(
+                [
+                    tip,
+                    (base.0 + side.0, base.1 + side.1),
+                    (base.0 - side.0, base.1 - side.1),
+                ],
+                colour,
+                0.9,
+            );
         }
         for &c in self.nodes() {
             let (x, y) = centre(c);
@@ -738,12 +908,23 @@ mod tests {
     use sim::{AutoReset, BallSpawn, Env, EnvConfig, Maze};
 
     fn cfg(candidates: CandidateSet, seed: u64) -> PlannerConfig {
-        PlannerConfig { candidates, seed, walks_per_node: 256, walk_len: 200, ..PlannerConfig::default() }
+        PlannerConfig {
+            candidates,
+            seed,
+            walks_per_node: 256,
+            walk_len: 200,
+            ..PlannerConfig::default()
+        }
     }
 
     /// A fresh simulator in the graph's walk rules, episode-long, no reset.
     fn fresh_env(g: &WorldGraph) -> Env {
-        let c = EnvConfig { task: g.config().walk_task(), max_steps: u32::MAX, balls: BallSpawn::Layout, auto_reset: AutoReset::Off };
+        let c = EnvConfig {
+            task: g.config().walk_task(),
+            max_steps: u32::MAX,
+            balls: BallSpawn::Layout,
+            auto_reset: AutoReset::Off,
+        };
         Env::new(g.layout().clone(), c, 0, 0)
     }
 
@@ -760,7 +941,10 @@ mod tests {
             env.step_meta(a);
             let at = CellIdx::of_pose(env.pose(), w);
             if at != c {
-                return Err(format!("action {i} ({}) leads to {at}, the route says {c}", action::NAMES[a as usize]));
+                return Err(format!(
+                    "action {i} ({}) leads to {at}, the route says {c}",
+                    action::NAMES[a as usize]
+                ));
             }
             if let Some(n) = g.node_at(at)
                 && passed.last() != Some(&n)
@@ -776,7 +960,11 @@ mod tests {
         // own start node, so `passed` can hold more).
         let mut it = passed.iter();
         if !route.nodes().iter().all(|n| it.any(|p| p == n)) {
-            return Err(format!("nodes {:?} not passed in order {:?}", route.nodes(), passed));
+            return Err(format!(
+                "nodes {:?} not passed in order {:?}",
+                route.nodes(),
+                passed
+            ));
         }
         Ok(())
     }
@@ -837,7 +1025,11 @@ mod tests {
                     }
                 }
             }
-            let reach: Vec<usize> = floor.iter().copied().filter(|&i| seen[i] && i != start).collect();
+            let reach: Vec<usize> = floor
+                .iter()
+                .copied()
+                .filter(|&i| seen[i] && i != start)
+                .collect();
             if reach.len() < 5 {
                 continue;
             }
@@ -854,7 +1046,10 @@ mod tests {
                 }
             }
             g[start] = b"<>^v"[rng.random_range(0..4)];
-            let text: String = g.chunks(w).map(|row| String::from_utf8_lossy(row).into_owned() + "\n").collect();
+            let text: String = g
+                .chunks(w)
+                .map(|row| String::from_utf8_lossy(row).into_owned() + "\n")
+                .collect();
             if let Ok(l) = Layout::parse(&format!("random-{seed}"), &text)
                 && crate::pivotal::v_all(&l).len() >= 5
             {
@@ -887,10 +1082,18 @@ mod tests {
                         prop_assert!(d != UNREACHABLE);
                         prop_assert_eq!(len, route.len());
                         let hops = route.nodes().len() - 1;
-                        prop_assert!(len <= d as usize + 2 * hops, "{} actions for distance {} over {} hops", len, d, hops);
+                        prop_assert!(
+                            len <= d as usize + 2 * hops,
+                            "{} actions for distance {} over {} hops",
+                            len,
+                            d,
+                            hops
+                        );
                         let mut env = fresh_env(g);
                         env.teleport(route.start().expect("a route has a start"));
-                        replay(g, &mut env, &route, b).map_err(|e| TestCaseError::fail(format!("{}: {a} -> {b}: {e}", g.layout().name)))?;
+                        replay(g, &mut env, &route, b).map_err(|e| {
+                            TestCaseError::fail(format!("{}: {a} -> {b}: {e}", g.layout().name))
+                        })?;
                     }
                     Err(PlannerError::Unreachable { .. }) => prop_assert_eq!(d, UNREACHABLE),
                     Err(e) => return Err(TestCaseError::fail(e.to_string())),
@@ -961,10 +1164,20 @@ mod tests {
 
     #[test]
     fn embedded_mazes_give_executable_routes() {
-        for (maze, door_key) in [(Maze::Small, true), (Maze::Medium, false), (Maze::Large, true)] {
+        for (maze, door_key) in [
+            (Maze::Small, true),
+            (Maze::Medium, false),
+            (Maze::Large, true),
+        ] {
             let layout = maze.layout(door_key);
-            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 24 }, 1), &[]).expect("graph");
-            assert!(g.edges().len() >= 24, "{}: only {} edges", layout.name, g.edges().len());
+            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 24 }, 1), &[])
+                .expect("graph");
+            assert!(
+                g.edges().len() >= 24,
+                "{}: only {} edges",
+                layout.name,
+                g.edges().len()
+            );
             check_graph(&g).expect("routes execute");
         }
     }
@@ -981,7 +1194,11 @@ mod tests {
             .nodes()
             .iter()
             .filter(|c| layout.cells[c.index()] != Object::Exit as u8)
-            .map(|&c| (0..4).filter(|&d| g.node_at(c.step(d, &layout)).is_some()).count())
+            .map(|&c| {
+                (0..4)
+                    .filter(|&d| g.node_at(c.step(d, &layout)).is_some())
+                    .count()
+            })
             .sum();
         assert_eq!(g.edges().len(), expected);
     }
@@ -992,14 +1209,30 @@ mod tests {
         // doors count as passable for validation).
         let text = Maze::Small.text(true).replace('K', ".");
         let layout = Layout::parse("small-doorkey-nokey", &text).expect("valid");
-        let door = CellIdx(layout.cells.iter().position(|&c| c == Object::DoorLocked as u8).expect("locked door") as u32);
-        let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 30 }, 4), &[]).expect("graph");
+        let door = CellIdx(
+            layout
+                .cells
+                .iter()
+                .position(|&c| c == Object::DoorLocked as u8)
+                .expect("locked door") as u32,
+        );
+        let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 30 }, 4), &[])
+            .expect("graph");
         assert!(!g.edges().is_empty());
         for e in g.edges() {
-            assert!(!e.cells.contains(&door), "{} -> {} crosses the locked door", e.from, e.to);
+            assert!(
+                !e.cells.contains(&door),
+                "{} -> {} crosses the locked door",
+                e.from,
+                e.to
+            );
         }
         // Nodes on the two sides of the door are not connected.
-        let exit = layout.cells.iter().position(|&c| c == Object::Exit as u8).expect("exit");
+        let exit = layout
+            .cells
+            .iter()
+            .position(|&c| c == Object::Exit as u8)
+            .expect("exit");
         let blocked = {
             let mut l = layout.clone();
             l.cells[door.index()] = Object::Wall as u8;
@@ -1013,14 +1246,33 @@ mod tests {
             }
         }
         // With the key next to the door, an edge goes through it, picking the key up.
-        let layout = Layout::parse("t", "#########\n#.>..D.E#\n#K#######\n#########\n").expect("valid");
-        let nodes = [CellIdx::from_xy(2, 1, layout.width), CellIdx::from_xy(6, 1, layout.width)];
-        let g = WorldGraph::build(&layout, &PlannerConfig { candidates: CandidateSet::Given, walks_per_node: 4096, ..cfg(CandidateSet::Given, 2) }, &nodes).expect("graph");
-        let e = g.edge(NodeId(0), NodeId(1)).expect("edge through the unlocked door");
+        let layout =
+            Layout::parse("t", "#########\n#.>..D.E#\n#K#######\n#########\n").expect("valid");
+        let nodes = [
+            CellIdx::from_xy(2, 1, layout.width),
+            CellIdx::from_xy(6, 1, layout.width),
+        ];
+        let g = WorldGraph::build(
+            &layout,
+            &PlannerConfig {
+                candidates: CandidateSet::Given,
+                walks_per_node: 4096,
+                ..cfg(CandidateSet::Given, 2)
+            },
+            &nodes,
+        )
+        .expect("graph");
+        let e = g
+            .edge(NodeId(0), NodeId(1))
+            .expect("edge through the unlocked door");
         assert!(e.actions.contains(&action::PICKUP) && e.actions.contains(&action::TOGGLE));
-        assert!(g.edge(NodeId(1), NodeId(0)).is_none(), "from the far side the door is locked");
+        assert!(
+            g.edge(NodeId(1), NodeId(0)).is_none(),
+            "from the far side the door is locked"
+        );
         let mut route = Route::default();
-        g.route_into(NodeId(0), 3, NodeId(1), &mut route).expect("route");
+        g.route_into(NodeId(0), 3, NodeId(1), &mut route)
+            .expect("route");
         let mut env = fresh_env(&g);
         env.teleport(route.start().expect("start"));
         replay(&g, &mut env, &route, NodeId(1)).expect("executable");
@@ -1030,21 +1282,45 @@ mod tests {
     #[test]
     fn refinement_accepts_only_shorter_valid_paths() {
         let layout = Maze::Small.layout(false);
-        let raw = PlannerConfig { shorten: false, ..cfg(CandidateSet::Random { k: 10 }, 3) };
+        let raw = PlannerConfig {
+            shorten: false,
+            ..cfg(CandidateSet::Random { k: 10 }, 3)
+        };
         let mut g = WorldGraph::build(&layout, &raw, &[]).expect("graph");
-        let exact = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 10 }, 3), &[]).expect("graph");
+        let exact = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 10 }, 3), &[])
+            .expect("graph");
         // Longer or broken proposals are refused.
-        assert_eq!(g.refine_edges(|e| Some(EdgePath { actions: [e.actions.clone(), vec![action::LEFT]].concat(), cells: [e.cells.clone(), vec![*e.cells.last().expect("path")]].concat(), ..e.clone() })), 0);
+        assert_eq!(
+            g.refine_edges(|e| Some(EdgePath {
+                actions: [e.actions.clone(), vec![action::LEFT]].concat(),
+                cells: [e.cells.clone(), vec![*e.cells.last().expect("path")]].concat(),
+                ..e.clone()
+            })),
+            0
+        );
         let nodes = g.nodes().to_vec();
-        assert_eq!(g.refine_edges(|e| Some(EdgePath { actions: vec![action::LEFT], cells: vec![nodes[e.to.index()]], ..e.clone() })), 0);
+        assert_eq!(
+            g.refine_edges(|e| Some(EdgePath {
+                actions: vec![action::LEFT],
+                cells: vec![nodes[e.to.index()]],
+                ..e.clone()
+            })),
+            0
+        );
         // The exact paths (a stand-in for π_g) are taken where shorter.
         let before: u32 = g.edges().iter().map(EdgePath::weight).sum();
         let changed = g.refine_edges(|e| exact.edge(e.from, e.to).cloned());
         let after: u32 = g.edges().iter().map(EdgePath::weight).sum();
-        assert!(changed > 0 && after < before, "{changed} edges, {before} -> {after}");
+        assert!(
+            changed > 0 && after < before,
+            "{changed} edges, {before} -> {after}"
+        );
         for a in 0..g.num_nodes() as u16 {
             for b in 0..g.num_nodes() as u16 {
-                assert_eq!(g.distance(NodeId(a), NodeId(b)), dijkstra(&g, NodeId(a))[b as usize]);
+                assert_eq!(
+                    g.distance(NodeId(a), NodeId(b)),
+                    dijkstra(&g, NodeId(a))[b as usize]
+                );
             }
         }
     }
@@ -1052,7 +1328,8 @@ mod tests {
     #[test]
     fn json_round_trip_and_atomic_save() {
         let layout = Maze::Small.layout(true);
-        let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 12 }, 9), &[]).expect("graph");
+        let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 12 }, 9), &[])
+            .expect("graph");
         let dir = std::env::temp_dir().join(format!("planner-json-{}", std::process::id()));
         let path = dir.join("graph.json");
         g.save(&path).expect("save");
@@ -1074,7 +1351,9 @@ mod tests {
         let with = |f: &dyn Fn(&mut serde_json::Value)| {
             let mut v = v.clone();
             f(&mut v);
-            WorldGraph::from_json("g.json", &v.to_string()).expect_err("must be refused").to_string()
+            WorldGraph::from_json("g.json", &v.to_string())
+                .expect_err("must be refused")
+                .to_string()
         };
         assert!(with(&|v| v["edges"][0]["weight"] = 999.into()).contains("weight"));
         assert!(with(&|v| v["edges"][0]["actions"][0] = 6.into()).contains("edge"));
@@ -1086,36 +1365,76 @@ mod tests {
             v["nodes"][1]["y"] = y;
         });
         assert!(dup.contains("twice"), "{dup}");
-        let e = WorldGraph::from_json("g.json", "{").expect_err("truncated").to_string();
+        let e = WorldGraph::from_json("g.json", "{")
+            .expect_err("truncated")
+            .to_string();
         assert!(e.starts_with("g.json"), "{e}");
     }
 
     #[test]
     fn unknown_nodes_and_unreachable_pairs_are_errors() {
         let layout = Layout::parse("t", "#######\n#>.D.E#\n#######\n").expect("valid");
-        let nodes = [CellIdx::from_xy(2, 1, layout.width), CellIdx::from_xy(4, 1, layout.width)];
+        let nodes = [
+            CellIdx::from_xy(2, 1, layout.width),
+            CellIdx::from_xy(4, 1, layout.width),
+        ];
         let g = WorldGraph::build(&layout, &cfg(CandidateSet::Given, 0), &nodes).expect("graph");
         let mut r = Route::default();
-        assert!(matches!(g.route_into(NodeId(0), 0, NodeId(1), &mut r), Err(PlannerError::Unreachable { .. })));
-        assert!(matches!(g.route_into(NodeId(0), 0, NodeId(2), &mut r), Err(PlannerError::UnknownNode { .. })));
+        assert!(matches!(
+            g.route_into(NodeId(0), 0, NodeId(1), &mut r),
+            Err(PlannerError::Unreachable { .. })
+        ));
+        assert!(matches!(
+            g.route_into(NodeId(0), 0, NodeId(2), &mut r),
+            Err(PlannerError::UnknownNode { .. })
+        ));
         assert!(r.is_empty() && r.start().is_none());
-        assert_eq!(g.route_into(NodeId(1), 2, NodeId(1), &mut r).expect("trivial route"), 0);
+        assert_eq!(
+            g.route_into(NodeId(1), 2, NodeId(1), &mut r)
+                .expect("trivial route"),
+            0
+        );
         assert_eq!(r.nodes(), &[NodeId(1)]);
-        let e = g.route_into(NodeId(0), 0, NodeId(1), &mut r).expect_err("unreachable");
+        let e = g
+            .route_into(NodeId(0), 0, NodeId(1), &mut r)
+            .expect_err("unreachable");
         assert_eq!(e.route_status(), shm_schemas::RouteStatus::Unreachable);
-        let e = g.route_from_pose_into(Pose { x: 0, y: 0, dir: 0 }, NodeId(0), g.initial_world(), &mut r).expect_err("a wall");
+        let e = g
+            .route_from_pose_into(
+                Pose { x: 0, y: 0, dir: 0 },
+                NodeId(0),
+                g.initial_world(),
+                &mut r,
+            )
+            .expect_err("a wall");
         assert_eq!(e.route_status(), shm_schemas::RouteStatus::StartNotOnGraph);
         // Wire copy: fits or writes nothing.
-        g.route_from_pose_into(Pose { x: 1, y: 1, dir: 2 }, NodeId(0), g.initial_world(), &mut r).expect("route");
+        g.route_from_pose_into(
+            Pose { x: 1, y: 1, dir: 2 },
+            NodeId(0),
+            g.initial_world(),
+            &mut r,
+        )
+        .expect("route");
         // Turn around (two turns either way), then one step onto node 0.
         assert_eq!(r.len(), 3);
-        assert!(r.actions()[0] == r.actions()[1] && r.actions()[0] != action::FORWARD && r.actions()[2] == action::FORWARD);
+        assert!(
+            r.actions()[0] == r.actions()[1]
+                && r.actions()[0] != action::FORWARD
+                && r.actions()[2] == action::FORWARD
+        );
         let (mut p, mut c, mut a) = ([7u16; 4], [7u32; 4], [7u8; 4]);
         assert_eq!(r.write_wire(&mut p, &mut c, &mut a), Some((1, 3)));
-        assert_eq!((p[0], &c[..3], &a[..3]), (0, &[8u32, 8, 9][..], r.actions()));
+        assert_eq!(
+            (p[0], &c[..3], &a[..3]),
+            (0, &[8u32, 8, 9][..], r.actions())
+        );
         assert_eq!(r.write_wire(&mut p, &mut c[..2], &mut a), None);
         let two_keys = Layout::parse("k", "#######\n#>KK.E#\n#######\n").expect("valid");
-        assert!(matches!(WorldGraph::build(&two_keys, &cfg(CandidateSet::All, 0), &[]), Err(PlannerError::UnsupportedLayout { .. })));
+        assert!(matches!(
+            WorldGraph::build(&two_keys, &cfg(CandidateSet::All, 0), &[]),
+            Err(PlannerError::UnsupportedLayout { .. })
+        ));
     }
 
     /// How much of each embedded maze the default walks connect; run with
@@ -1127,10 +1446,28 @@ mod tests {
             for k in [16, 32, 64] {
                 let layout = maze.layout(false);
                 let t = std::time::Instant::now();
-                let g = WorldGraph::build(&layout, &PlannerConfig { candidates: CandidateSet::Random { k }, ..PlannerConfig::default() }, &[]).expect("graph");
+                let g = WorldGraph::build(
+                    &layout,
+                    &PlannerConfig {
+                        candidates: CandidateSet::Random { k },
+                        ..PlannerConfig::default()
+                    },
+                    &[],
+                )
+                .expect("graph");
                 let n = g.num_nodes();
-                let pairs = (0..n * n).filter(|&i| g.distance(NodeId((i / n) as u16), NodeId((i % n) as u16)) != UNREACHABLE).count();
-                println!("{} k={k}: {} edges, {:.1}% of pairs connected, built in {:.2?}", layout.name, g.edges().len(), 100.0 * pairs as f64 / (n * n) as f64, t.elapsed());
+                let pairs = (0..n * n)
+                    .filter(|&i| {
+                        g.distance(NodeId((i / n) as u16), NodeId((i % n) as u16)) != UNREACHABLE
+                    })
+                    .count();
+                println!(
+                    "{} k={k}: {} edges, {:.1}% of pairs connected, built in {:.2?}",
+                    layout.name,
+                    g.edges().len(),
+                    100.0 * pairs as f64 / (n * n) as f64,
+                    t.elapsed()
+                );
             }
         }
     }
@@ -1144,8 +1481,10 @@ mod tests {
         let dir = std::env::temp_dir().join("planner-pictures");
         for (maze, dk) in [(Maze::Medium, false), (Maze::Small, true)] {
             let layout = maze.layout(dk);
-            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 24 }, 1), &[]).expect("graph");
-            g.save_png(&dir.join(format!("{}-graph.png", layout.name)), 24).expect("png");
+            let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 24 }, 1), &[])
+                .expect("graph");
+            g.save_png(&dir.join(format!("{}-graph.png", layout.name)), 24)
+                .expect("png");
             let mut env = fresh_env(&g);
             let mut cov = crate::Coverage::for_layout(&layout);
             let mut rng = SmallRng::seed_from_u64(0);
@@ -1154,7 +1493,12 @@ mod tests {
                 batch.push(env.step_meta(rng.random_range(0..3)));
             }
             cov.observe(&batch);
-            cov.save_png(&layout, &dir.join(format!("{}-coverage.png", layout.name)), 24).expect("png");
+            cov.save_png(
+                &layout,
+                &dir.join(format!("{}-coverage.png", layout.name)),
+                24,
+            )
+            .expect("png");
         }
         println!("pictures in {}", dir.display());
     }
@@ -1164,7 +1508,11 @@ mod tests {
     #[test]
     #[ignore = "prints timings; not a correctness test"]
     fn timing_rebuild_and_route_queries() {
-        for (maze, candidates) in [(Maze::Medium, CandidateSet::All), (Maze::Large, CandidateSet::Random { k: 500 }), (Maze::Large, CandidateSet::Random { k: 32 })] {
+        for (maze, candidates) in [
+            (Maze::Medium, CandidateSet::All),
+            (Maze::Large, CandidateSet::Random { k: 500 }),
+            (Maze::Large, CandidateSet::Random { k: 32 }),
+        ] {
             let layout = maze.layout(false);
             let t = std::time::Instant::now();
             let mut g = WorldGraph::build(&layout, &cfg(candidates, 0), &[]).expect("graph");
@@ -1178,14 +1526,19 @@ mod tests {
             let mut times = Vec::with_capacity(100_000);
             let mut lens = 0usize;
             for _ in 0..100_000 {
-                let (a, b) = (NodeId(rng.random_range(0..n) as u16), NodeId(rng.random_range(0..n) as u16));
+                let (a, b) = (
+                    NodeId(rng.random_range(0..n) as u16),
+                    NodeId(rng.random_range(0..n) as u16),
+                );
                 let t = std::time::Instant::now();
                 let r = g.route_into(a, 0, b, &mut route);
                 times.push(t.elapsed().as_nanos() as u64);
                 lens += r.unwrap_or(0);
             }
             times.sort_unstable();
-            let p = |times: &[u64], q: f64| times[((times.len() - 1) as f64 * q) as usize] as f64 / 1000.0;
+            let p = |times: &[u64], q: f64| {
+                times[((times.len() - 1) as f64 * q) as usize] as f64 / 1000.0
+            };
             println!(
                 "{}: {n} nodes, {} edges, build {:.2?}, rebuild_shortest_paths {:.2?}, route_into p50 {:.2} us p99 {:.2} us max {:.2} us (mean route {:.0} actions)",
                 layout.name,
@@ -1200,14 +1553,20 @@ mod tests {
             let cells = crate::pivotal::v_all(&layout);
             let mut pose_times = Vec::with_capacity(100_000);
             for _ in 0..100_000 {
-                let pose = cells[rng.random_range(0..cells.len())].pose(layout.width, rng.random_range(0..4));
+                let pose = cells[rng.random_range(0..cells.len())]
+                    .pose(layout.width, rng.random_range(0..4));
                 let b = NodeId(rng.random_range(0..n) as u16);
                 let t = std::time::Instant::now();
                 let _ = g.route_from_pose_into(pose, b, g.initial_world(), &mut route);
                 pose_times.push(t.elapsed().as_nanos() as u64);
             }
             pose_times.sort_unstable();
-            println!("{}: route_from_pose_into p50 {:.2} us p99 {:.2} us", layout.name, p(&pose_times, 0.5), p(&pose_times, 0.99));
+            println!(
+                "{}: route_from_pose_into p50 {:.2} us p99 {:.2} us",
+                layout.name,
+                p(&pose_times, 0.5),
+                p(&pose_times, 0.99)
+            );
         }
     }
 }

@@ -28,7 +28,10 @@ impl Backoff {
     /// A wait that starts now.
     #[inline]
     pub fn new() -> Backoff {
-        Backoff { start: Instant::now(), polls: 0 }
+        Backoff {
+            start: Instant::now(),
+            polls: 0,
+        }
     }
 
     /// Call after each empty poll.

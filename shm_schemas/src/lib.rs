@@ -72,8 +72,8 @@ mod seq;
 pub mod service;
 mod step;
 
-pub use backoff::Backoff;
 pub use action::{ActBatch, ActBatchMut, ActHeader, NUM_ACTIONS};
+pub use backoff::Backoff;
 pub use error::{Channel, SchemaError, ShmError};
 pub use graph::{GraphEdge, GraphHeader, GraphSnapshot, GraphSnapshotMut, MAX_EDGES, MAX_PIVOTS};
 pub use plan::{

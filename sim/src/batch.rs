@@ -41,12 +41,18 @@ pub struct StepBuffers {
 impl StepBuffers {
     /// Buffers for `n` environments of `cells_per_env` cells.
     pub fn new(n: usize, cells_per_env: usize) -> StepBuffers {
-        StepBuffers { cells: vec![0; n * cells_per_env], meta: vec![EnvMeta::EMPTY; n] }
+        StepBuffers {
+            cells: vec![0; n * cells_per_env],
+            meta: vec![EnvMeta::EMPTY; n],
+        }
     }
 
     /// Borrowed view for [`BatchEnv::step`].
     pub fn out(&mut self) -> StepOut<'_> {
-        StepOut { cells: &mut self.cells, meta: &mut self.meta }
+        StepOut {
+            cells: &mut self.cells,
+            meta: &mut self.meta,
+        }
     }
 }
 
@@ -63,9 +69,17 @@ pub struct BatchEnv {
 impl BatchEnv {
     /// `n` environments seeded from `(seed, 0..n)`, stepped on `threads`
     /// threads (1 = on the caller's thread, no pool).
-    pub fn new(layout: Layout, cfg: EnvConfig, n: usize, seed: u64, threads: usize) -> Result<BatchEnv, SimError> {
+    pub fn new(
+        layout: Layout,
+        cfg: EnvConfig,
+        n: usize,
+        seed: u64,
+        threads: usize,
+    ) -> Result<BatchEnv, SimError> {
         if n == 0 {
-            return Err(SimError::Config("a batch needs at least one environment".into()));
+            return Err(SimError::Config(
+                "a batch needs at least one environment".into(),
+            ));
         }
         if threads == 0 {
             return Err(SimError::Config("--threads must be at least 1".into()));
@@ -75,21 +89,30 @@ impl BatchEnv {
         }
         let cells_per_env = layout.width * layout.height;
         let shared = Shared::new(layout, cfg);
-        let envs = (0..n).map(|i| Env::with_shared(Arc::clone(&shared), seed, i as u64)).collect();
+        let envs = (0..n)
+            .map(|i| Env::with_shared(Arc::clone(&shared), seed, i as u64))
+            .collect();
         let pool = if threads > 1 {
             Some(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .thread_name(|i| format!("sim-{i}"))
                     .build()
-                    .map_err(|e| SimError::Config(format!("cannot start {threads} threads: {e}")))?,
+                    .map_err(|e| {
+                        SimError::Config(format!("cannot start {threads} threads: {e}"))
+                    })?,
             )
         } else {
             None
         };
         // A few tasks per thread balances load without drowning in overhead.
         let chunk = n.div_ceil(threads * 4).max(16);
-        Ok(BatchEnv { envs, pool, cells_per_env, chunk })
+        Ok(BatchEnv {
+            envs,
+            pool,
+            cells_per_env,
+            chunk,
+        })
     }
 
     /// Number of environments.
@@ -128,7 +151,11 @@ impl BatchEnv {
     }
 
     fn check(&self, out: &StepOut<'_>) {
-        assert_eq!(out.cells.len(), self.len() * self.cells_per_env, "cells buffer size");
+        assert_eq!(
+            out.cells.len(),
+            self.len() * self.cells_per_env,
+            "cells buffer size"
+        );
         assert_eq!(out.meta.len(), self.len(), "meta buffer size");
     }
 
@@ -136,7 +163,12 @@ impl BatchEnv {
     pub fn reset(&mut self, out: StepOut<'_>) {
         self.check(&out);
         let cpe = self.cells_per_env;
-        for ((env, cells), meta) in self.envs.iter_mut().zip(out.cells.chunks_mut(cpe)).zip(out.meta.iter_mut()) {
+        for ((env, cells), meta) in self
+            .envs
+            .iter_mut()
+            .zip(out.cells.chunks_mut(cpe))
+            .zip(out.meta.iter_mut())
+        {
             env.reset(cells, meta);
         }
     }
@@ -154,7 +186,9 @@ impl BatchEnv {
                     .zip(actions.par_chunks(chunk))
                     .zip(cells.par_chunks_mut(chunk * cpe))
                     .zip(meta.par_chunks_mut(chunk))
-                    .for_each(|(((envs, actions), cells), meta)| step_chunk(envs, actions, cells, meta, cpe));
+                    .for_each(|(((envs, actions), cells), meta)| {
+                        step_chunk(envs, actions, cells, meta, cpe)
+                    });
             }),
             None => step_chunk(envs, actions, cells, meta, cpe),
         }
@@ -162,8 +196,19 @@ impl BatchEnv {
 }
 
 #[inline]
-fn step_chunk(envs: &mut [Env], actions: &[u8], cells: &mut [u8], meta: &mut [EnvMeta], cpe: usize) {
-    for (((env, &a), c), m) in envs.iter_mut().zip(actions).zip(cells.chunks_exact_mut(cpe)).zip(meta.iter_mut()) {
+fn step_chunk(
+    envs: &mut [Env],
+    actions: &[u8],
+    cells: &mut [u8],
+    meta: &mut [EnvMeta],
+    cpe: usize,
+) {
+    for (((env, &a), c), m) in envs
+        .iter_mut()
+        .zip(actions)
+        .zip(cells.chunks_exact_mut(cpe))
+        .zip(meta.iter_mut())
+    {
         env.step(a, c, m);
     }
 }

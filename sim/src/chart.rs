@@ -56,7 +56,10 @@ impl Canvas {
     /// Draws `text` with its top-left corner at `(x, y)`, each glyph scaled by `scale`.
     pub fn text(&mut self, x: i64, y: i64, text: &str, scale: i64, c: Rgb) {
         for (k, ch) in text.chars().enumerate() {
-            let glyph = BASIC_LEGACY.get(ch as usize).copied().unwrap_or(BASIC_LEGACY[b'?' as usize]);
+            let glyph = BASIC_LEGACY
+                .get(ch as usize)
+                .copied()
+                .unwrap_or(BASIC_LEGACY[b'?' as usize]);
             for (row, bits) in glyph.iter().enumerate() {
                 for col in 0..8 {
                     if bits & (1 << col) != 0 {
@@ -79,7 +82,11 @@ fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
     let span = (hi - lo).max(f64::MIN_POSITIVE);
     let raw = span / target.max(1) as f64;
     let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * mag).find(|s| span / s <= target as f64).unwrap_or(10.0 * mag);
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * mag)
+        .find(|s| span / s <= target as f64)
+        .unwrap_or(10.0 * mag);
     let mut t = (lo / step).ceil() * step;
     let mut out = Vec::new();
     while t <= hi + step * 1e-9 {
@@ -93,7 +100,10 @@ fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
 fn fmt_tick(v: f64) -> String {
     let a = v.abs();
     if a >= 1e6 {
-        format!("{:.3}M", v / 1e6).trim_end_matches('0').trim_end_matches('.').replace(".M", "M")
+        format!("{:.3}M", v / 1e6)
+            .trim_end_matches('0')
+            .trim_end_matches('.')
+            .replace(".M", "M")
     } else if a >= 1e4 {
         format!("{:.0}k", v / 1e3)
     } else if a >= 100.0 || v == v.trunc() {
@@ -116,8 +126,17 @@ impl LineChart {
             XScale::Linear => x,
             XScale::PercentileTail => (1.0 / (1.0 - (x / 100.0).min(0.999_999))).log10(),
         };
-        let pts = self.series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let pts = self
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|p| p.0.is_finite() && p.1.is_finite());
+        let (mut x0, mut x1, mut y0, mut y1) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         for &(x, y) in pts {
             let x = fx(x);
             x0 = x0.min(x);
@@ -161,7 +180,14 @@ impl LineChart {
                 }
             }
             XScale::PercentileTail => {
-                for (p, label) in [(0.0, "0%"), (90.0, "90%"), (99.0, "99%"), (99.9, "99.9%"), (99.99, "99.99%"), (99.999, "99.999%")] {
+                for (p, label) in [
+                    (0.0, "0%"),
+                    (90.0, "90%"),
+                    (99.0, "99%"),
+                    (99.9, "99.9%"),
+                    (99.99, "99.99%"),
+                    (99.999, "99.999%"),
+                ] {
                     if fx(p) > x1 + 1e-9 {
                         break;
                     }
@@ -194,12 +220,25 @@ impl LineChart {
         }
         // Title, labels, legend.
         c.text((w - text_width(&self.title, 2)) / 2, 8, &self.title, 2, ink);
-        c.text(left + (pw - text_width(&self.x_label, 1)) / 2, h - 18, &self.x_label, 1, ink);
+        c.text(
+            left + (pw - text_width(&self.x_label, 1)) / 2,
+            h - 18,
+            &self.x_label,
+            1,
+            ink,
+        );
         c.text(6, top - 14, &self.y_label, 1, ink);
         let mut ly = top + 6;
         for (k, s) in self.series.iter().enumerate() {
             let lx = left + pw - text_width(&s.name, 1) - 30;
-            c.fill_rect(lx - 4, ly - 3, text_width(&s.name, 1) + 32, 14, [255, 255, 255], 0.85);
+            c.fill_rect(
+                lx - 4,
+                ly - 3,
+                text_width(&s.name, 1) + 32,
+                14,
+                [255, 255, 255],
+                0.85,
+            );
             c.fill_rect(lx, ly + 3, 18, 3, PALETTE[k % PALETTE.len()], 1.0);
             c.text(lx + 24, ly, &s.name, 1, ink);
             ly += 16;
@@ -225,7 +264,10 @@ mod tests {
             title: "t".into(),
             x_label: "x".into(),
             y_label: "y".into(),
-            series: vec![Series { name: "a".into(), points: vec![(0.0, 0.0), (1.0, 1.0)] }],
+            series: vec![Series {
+                name: "a".into(),
+                points: vec![(0.0, 0.0), (1.0, 1.0)],
+            }],
             x_scale: XScale::Linear,
         };
         let c = chart.render(200, 150);

@@ -63,7 +63,9 @@ pub mod action {
     /// Start a new episode now (not a MiniGrid action; see the module docs).
     pub const RESET: u8 = 255;
     /// Names, indexed by code.
-    pub const NAMES: [&str; 7] = ["left", "right", "forward", "pickup", "drop", "toggle", "done"];
+    pub const NAMES: [&str; 7] = [
+        "left", "right", "forward", "pickup", "drop", "toggle", "done",
+    ];
 }
 
 /// What happens when an episode ends; see the module docs.
@@ -103,7 +105,12 @@ pub struct EnvConfig {
 
 impl Default for EnvConfig {
     fn default() -> Self {
-        EnvConfig { task: Task::MultiGoal, max_steps: 500, balls: BallSpawn::Random(DEFAULT_BALLS), auto_reset: AutoReset::SameStep }
+        EnvConfig {
+            task: Task::MultiGoal,
+            max_steps: 500,
+            balls: BallSpawn::Random(DEFAULT_BALLS),
+            auto_reset: AutoReset::SameStep,
+        }
     }
 }
 
@@ -115,7 +122,11 @@ impl EnvConfig {
         EnvConfig {
             task,
             max_steps: (2 * layout.free_cells().len()) as u32,
-            balls: if task.is_multigoal() { BallSpawn::Random(DEFAULT_BALLS) } else { BallSpawn::Layout },
+            balls: if task.is_multigoal() {
+                BallSpawn::Random(DEFAULT_BALLS)
+            } else {
+                BallSpawn::Layout
+            },
             auto_reset: AutoReset::SameStep,
         }
     }
@@ -154,7 +165,12 @@ impl Shared {
             .filter(|&i| i != start && layout.cells[i as usize] == Object::Floor as u8)
             .collect();
         let w = layout.width as isize;
-        Arc::new(Shared { layout, cfg, spawnable, dir_offset: [1, w, -1, -w] })
+        Arc::new(Shared {
+            layout,
+            cfg,
+            spawnable,
+            dir_offset: [1, w, -1, -w],
+        })
     }
 }
 
@@ -225,7 +241,11 @@ impl Env {
     /// Current agent pose.
     pub fn pose(&self) -> Pose {
         let w = self.shared.layout.width;
-        Pose { x: (self.pos % w) as u16, y: (self.pos / w) as u16, dir: self.dir }
+        Pose {
+            x: (self.pos % w) as u16,
+            y: (self.pos / w) as u16,
+            dir: self.dir,
+        }
     }
 
     /// Cell index of the agent.
@@ -269,7 +289,10 @@ impl Env {
     /// Starts a new episode and writes its first observation.
     pub fn reset(&mut self, cells: &mut [u8], meta: &mut EnvMeta) {
         self.reset_state();
-        *meta = EnvMeta { flags: flags::RESET, ..EnvMeta::EMPTY };
+        *meta = EnvMeta {
+            flags: flags::RESET,
+            ..EnvMeta::EMPTY
+        };
         self.write_agent(meta);
         cells.copy_from_slice(&self.grid);
     }
@@ -278,7 +301,9 @@ impl Env {
         let shared = Arc::clone(&self.shared);
         let sh = &*shared;
         self.grid.copy_from_slice(&sh.layout.cells);
-        self.pos = sh.layout.cell_index(sh.layout.start.x as usize, sh.layout.start.y as usize);
+        self.pos = sh
+            .layout
+            .cell_index(sh.layout.start.x as usize, sh.layout.start.y as usize);
         self.dir = sh.layout.start.dir;
         self.carrying = NOTHING;
         self.t = 0;
@@ -287,7 +312,11 @@ impl Env {
         self.door_opened = false;
         self.lava = NO_LAVA;
         self.done_flags = 0;
-        self.balls_spawned = self.grid.iter().filter(|&&c| c == Object::Ball as u8).count() as u8;
+        self.balls_spawned = self
+            .grid
+            .iter()
+            .filter(|&&c| c == Object::Ball as u8)
+            .count() as u8;
         if sh.cfg.task.is_multigoal()
             && let BallSpawn::Random(n) = sh.cfg.balls
         {
@@ -365,7 +394,11 @@ impl Env {
                         terminated = true;
                         reward += match task {
                             Task::MultiGoalSparse => {
-                                if self.balls_spawned == 0 { 0.0 } else { self.balls as f32 / self.balls_spawned as f32 }
+                                if self.balls_spawned == 0 {
+                                    0.0
+                                } else {
+                                    self.balls as f32 / self.balls_spawned as f32
+                                }
                             }
                             _ => 1.0,
                         };
@@ -433,7 +466,10 @@ impl Env {
     fn advance(&mut self, action: u8, meta: &mut EnvMeta) {
         if action == action::RESET {
             self.reset_state();
-            *meta = EnvMeta { flags: flags::RESET, ..EnvMeta::EMPTY };
+            *meta = EnvMeta {
+                flags: flags::RESET,
+                ..EnvMeta::EMPTY
+            };
             self.write_agent(meta);
             return;
         }
@@ -509,7 +545,11 @@ pub fn minigrid_encode(cells: &[u8], agent: usize, dir: u8) -> Vec<[u8; 3]> {
         .enumerate()
         .map(|(i, &c)| {
             if i == agent {
-                [crate::object::minigrid_idx::AGENT, crate::object::minigrid_color::RED, dir]
+                [
+                    crate::object::minigrid_idx::AGENT,
+                    crate::object::minigrid_color::RED,
+                    dir,
+                ]
             } else {
                 Object::from_code(c).map_or([0, 0, 0], Object::minigrid)
             }

@@ -117,7 +117,10 @@ impl fmt::Display for LayoutError {
                 "unknown character {c:?} at line {}, column {} (allowed: # . E K D C O B L > v < ^)",
                 self.line, self.col
             ),
-            TwoAgents { first_line, first_col } => write!(
+            TwoAgents {
+                first_line,
+                first_col,
+            } => write!(
                 f,
                 "a second agent at line {}, column {}; the first is at line {first_line}, column {first_col}",
                 self.line, self.col
@@ -191,7 +194,10 @@ impl Layout {
                 return Err(err(
                     y + 1,
                     n.min(width) + 1,
-                    LayoutErrorKind::RaggedRow { expected: width, found: n },
+                    LayoutErrorKind::RaggedRow {
+                        expected: width,
+                        found: n,
+                    },
                 ));
             }
             for (x, c) in row.chars().enumerate() {
@@ -200,10 +206,17 @@ impl Layout {
                         return Err(err(
                             y + 1,
                             x + 1,
-                            LayoutErrorKind::TwoAgents { first_line: fl, first_col: fc },
+                            LayoutErrorKind::TwoAgents {
+                                first_line: fl,
+                                first_col: fc,
+                            },
                         ));
                     }
-                    let pose = Pose { x: x as u16, y: y as u16, dir: dir as u8 };
+                    let pose = Pose {
+                        x: x as u16,
+                        y: y as u16,
+                        dir: dir as u8,
+                    };
                     start = Some((pose, y + 1, x + 1));
                     cells.push(Object::Floor as u8);
                 } else if let Some(o) = Object::from_char(c) {
@@ -235,22 +248,36 @@ impl Layout {
         let Some((start, ..)) = start else {
             return Err(err(0, 0, LayoutErrorKind::NoAgent));
         };
-        let exits: Vec<usize> = (0..cells.len()).filter(|&i| cells[i] == Object::Exit as u8).collect();
+        let exits: Vec<usize> = (0..cells.len())
+            .filter(|&i| cells[i] == Object::Exit as u8)
+            .collect();
         if exits.is_empty() {
             return Err(err(0, 0, LayoutErrorKind::NoExit));
         }
-        let layout = Layout { name: source.to_string(), width, height, cells, start };
+        let layout = Layout {
+            name: source.to_string(),
+            width,
+            height,
+            cells,
+            start,
+        };
         let reach = layout.reachable_from(layout.cell_index(start.x as usize, start.y as usize));
         if let Some(&e) = exits.iter().find(|&&e| !reach[e]) {
-            return Err(err(e / width + 1, e % width + 1, LayoutErrorKind::UnreachableExit));
+            return Err(err(
+                e / width + 1,
+                e % width + 1,
+                LayoutErrorKind::UnreachableExit,
+            ));
         }
         Ok(layout)
     }
 
     /// Reads and parses a layout file.
     pub fn from_file(path: &Path) -> Result<Layout, crate::SimError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| crate::SimError::Io { path: path.display().to_string(), source: e })?;
+        let text = std::fs::read_to_string(path).map_err(|e| crate::SimError::Io {
+            path: path.display().to_string(),
+            source: e,
+        })?;
         Ok(Layout::parse(&path.display().to_string(), &text)?)
     }
 
@@ -262,7 +289,8 @@ impl Layout {
 
     /// Object at `(x, y)` in the initial grid.
     pub fn object(&self, x: usize, y: usize) -> Object {
-        Object::from_code(self.cells[self.cell_index(x, y)]).expect("invariant: layouts hold valid codes")
+        Object::from_code(self.cells[self.cell_index(x, y)])
+            .expect("invariant: layouts hold valid codes")
     }
 
     /// Cells reachable from `from` by 4-neighbour moves through anything but
@@ -292,7 +320,8 @@ impl Layout {
     /// Indices of the cells an agent can ever stand on (walls excluded,
     /// reachable from the start): the state space `V_all` of the paper.
     pub fn free_cells(&self) -> Vec<u32> {
-        let reach = self.reachable_from(self.cell_index(self.start.x as usize, self.start.y as usize));
+        let reach =
+            self.reachable_from(self.cell_index(self.start.x as usize, self.start.y as usize));
         (0..self.cells.len())
             .filter(|&i| reach[i] && self.cells[i] != Object::Wall as u8)
             .map(|i| i as u32)
@@ -358,7 +387,11 @@ impl Maze {
 
     /// The parsed layout.
     pub fn layout(self, door_key: bool) -> Layout {
-        let name = if door_key { format!("{}-doorkey", self.name()) } else { self.name().to_string() };
+        let name = if door_key {
+            format!("{}-doorkey", self.name())
+        } else {
+            self.name().to_string()
+        };
         Layout::parse(&name, self.text(door_key)).expect("invariant: embedded mazes are valid")
     }
 }
@@ -370,7 +403,9 @@ impl std::str::FromStr for Maze {
             "small" => Ok(Maze::Small),
             "medium" => Ok(Maze::Medium),
             "large" => Ok(Maze::Large),
-            _ => Err(format!("unknown maze {s:?}: expected small, medium or large")),
+            _ => Err(format!(
+                "unknown maze {s:?}: expected small, medium or large"
+            )),
         }
     }
 }
@@ -420,7 +455,11 @@ mod tests {
     fn door_key_variants_lock_the_exit_behind_a_door() {
         for m in Maze::ALL {
             let l = m.layout(true);
-            let doors = l.cells.iter().filter(|&&c| c == Object::DoorLocked as u8).count();
+            let doors = l
+                .cells
+                .iter()
+                .filter(|&&c| c == Object::DoorLocked as u8)
+                .count();
             let keys = l.cells.iter().filter(|&&c| c == Object::Key as u8).count();
             assert_eq!((doors, keys), (1, 1), "{m}");
             // Treating the locked door as a wall, the exit is cut off.
@@ -430,10 +469,19 @@ mod tests {
                     *c = Object::Wall as u8;
                 }
             }
-            let reach = blocked.reachable_from(blocked.cell_index(l.start.x as usize, l.start.y as usize));
-            let exit = l.cells.iter().position(|&c| c == Object::Exit as u8).unwrap();
+            let reach =
+                blocked.reachable_from(blocked.cell_index(l.start.x as usize, l.start.y as usize));
+            let exit = l
+                .cells
+                .iter()
+                .position(|&c| c == Object::Exit as u8)
+                .unwrap();
             assert!(!reach[exit], "{m}: exit reachable without the door");
-            let key = l.cells.iter().position(|&c| c == Object::Key as u8).unwrap();
+            let key = l
+                .cells
+                .iter()
+                .position(|&c| c == Object::Key as u8)
+                .unwrap();
             assert!(reach[key], "{m}: key not reachable from the start");
         }
     }
@@ -445,16 +493,39 @@ mod tests {
         assert_eq!((l, c, k), (2, 3, LayoutErrorKind::UnknownChar('x')));
         let (l, c, k) = kind("######\n#>.<E#\n######\n");
         assert_eq!((l, c), (2, 4));
-        assert!(matches!(k, LayoutErrorKind::TwoAgents { first_line: 2, first_col: 2 }));
+        assert!(matches!(
+            k,
+            LayoutErrorKind::TwoAgents {
+                first_line: 2,
+                first_col: 2
+            }
+        ));
         assert_eq!(kind("#####\n#>..#\n#####\n").2, LayoutErrorKind::NoExit);
-        assert_eq!(kind("#####\n#...E\n#####\n"), (2, 5, LayoutErrorKind::NotEnclosed('E')));
-        assert_eq!(kind("#####\n>..E#\n#####\n"), (2, 1, LayoutErrorKind::NotEnclosed('>')));
+        assert_eq!(
+            kind("#####\n#...E\n#####\n"),
+            (2, 5, LayoutErrorKind::NotEnclosed('E'))
+        );
+        assert_eq!(
+            kind("#####\n>..E#\n#####\n"),
+            (2, 1, LayoutErrorKind::NotEnclosed('>'))
+        );
         assert_eq!(kind("#####\n#.#E#\n#####\n").2, LayoutErrorKind::NoAgent);
-        assert_eq!(kind("######\n#>#.E#\n######\n"), (2, 5, LayoutErrorKind::UnreachableExit));
-        assert_eq!(kind("#######\n#>.L.E#\n#######\n"), (2, 6, LayoutErrorKind::UnreachableExit));
+        assert_eq!(
+            kind("######\n#>#.E#\n######\n"),
+            (2, 5, LayoutErrorKind::UnreachableExit)
+        );
+        assert_eq!(
+            kind("#######\n#>.L.E#\n#######\n"),
+            (2, 6, LayoutErrorKind::UnreachableExit)
+        );
         assert_eq!(kind("").2, LayoutErrorKind::Empty);
-        let e = Layout::parse("maze.txt", "#####\n#>xE#\n#####\n").unwrap_err().to_string();
-        assert!(e.contains("maze.txt:2:3") && e.contains("line 2, column 3"), "{e}");
+        let e = Layout::parse("maze.txt", "#####\n#>xE#\n#####\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("maze.txt:2:3") && e.contains("line 2, column 3"),
+            "{e}"
+        );
     }
 
     #[test]

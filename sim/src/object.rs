@@ -138,14 +138,20 @@ impl Object {
     /// True for the three door states.
     #[inline]
     pub fn is_door(self) -> bool {
-        matches!(self, Object::DoorOpen | Object::DoorClosed | Object::DoorLocked)
+        matches!(
+            self,
+            Object::DoorOpen | Object::DoorClosed | Object::DoorLocked
+        )
     }
 
     /// MiniGrid's `can_overlap`: the agent may stand on it (balls are
     /// collected on contact in MultiGoal tasks, see `env`).
     #[inline]
     pub fn can_overlap(self) -> bool {
-        matches!(self, Object::Floor | Object::DoorOpen | Object::Exit | Object::Lava)
+        matches!(
+            self,
+            Object::Floor | Object::DoorOpen | Object::Exit | Object::Lava
+        )
     }
 
     /// MiniGrid's `can_pickup`.

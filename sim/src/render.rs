@@ -64,7 +64,9 @@ impl Canvas {
         let i = (y as usize * self.width + x as usize) * 3;
         for k in 0..3 {
             let old = self.rgb[i + k] as f32;
-            self.rgb[i + k] = (old + (c[k] as f32 - old) * alpha).round().clamp(0.0, 255.0) as u8;
+            self.rgb[i + k] = (old + (c[k] as f32 - old) * alpha)
+                .round()
+                .clamp(0.0, 255.0) as u8;
         }
     }
 
@@ -95,8 +97,14 @@ impl Canvas {
     pub fn line(&mut self, a: (f32, f32), b: (f32, f32), width: f32, c: Rgb, alpha: f32) {
         let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
         let r = (width / 2.0).max(0.5);
-        let (x0, x1) = ((a.0.min(b.0) - r).floor() as i64, (a.0.max(b.0) + r).ceil() as i64);
-        let (y0, y1) = ((a.1.min(b.1) - r).floor() as i64, (a.1.max(b.1) + r).ceil() as i64);
+        let (x0, x1) = (
+            (a.0.min(b.0) - r).floor() as i64,
+            (a.0.max(b.0) + r).ceil() as i64,
+        );
+        let (y0, y1) = (
+            (a.1.min(b.1) - r).floor() as i64,
+            (a.1.max(b.1) + r).ceil() as i64,
+        );
         // Distance-to-segment test over the bounding box: no double blending.
         for y in y0..=y1 {
             for x in x0..=x1 {
@@ -104,7 +112,8 @@ impl Canvas {
                 let t = if len == 0.0 {
                     0.0
                 } else {
-                    (((p.0 - a.0) * (b.0 - a.0) + (p.1 - a.1) * (b.1 - a.1)) / (len * len)).clamp(0.0, 1.0)
+                    (((p.0 - a.0) * (b.0 - a.0) + (p.1 - a.1) * (b.1 - a.1)) / (len * len))
+                        .clamp(0.0, 1.0)
                 };
                 let q = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
                 if (p.0 - q.0).powi(2) + (p.1 - q.1).powi(2) <= r * r {
@@ -117,14 +126,28 @@ impl Canvas {
     /// Fills the triangle `(a, b, c)`.
     pub fn fill_triangle(&mut self, p: [(f32, f32); 3], c: Rgb, alpha: f32) {
         let x0 = p.iter().map(|q| q.0).fold(f32::INFINITY, f32::min).floor() as i64;
-        let x1 = p.iter().map(|q| q.0).fold(f32::NEG_INFINITY, f32::max).ceil() as i64;
+        let x1 = p
+            .iter()
+            .map(|q| q.0)
+            .fold(f32::NEG_INFINITY, f32::max)
+            .ceil() as i64;
         let y0 = p.iter().map(|q| q.1).fold(f32::INFINITY, f32::min).floor() as i64;
-        let y1 = p.iter().map(|q| q.1).fold(f32::NEG_INFINITY, f32::max).ceil() as i64;
-        let edge = |a: (f32, f32), b: (f32, f32), q: (f32, f32)| (b.0 - a.0) * (q.1 - a.1) - (b.1 - a.1) * (q.0 - a.0);
+        let y1 = p
+            .iter()
+            .map(|q| q.1)
+            .fold(f32::NEG_INFINITY, f32::max)
+            .ceil() as i64;
+        let edge = |a: (f32, f32), b: (f32, f32), q: (f32, f32)| {
+            (b.0 - a.0) * (q.1 - a.1) - (b.1 - a.1) * (q.0 - a.0)
+        };
         for y in y0..=y1 {
             for x in x0..=x1 {
                 let q = (x as f32 + 0.5, y as f32 + 0.5);
-                let (e0, e1, e2) = (edge(p[0], p[1], q), edge(p[1], p[2], q), edge(p[2], p[0], q));
+                let (e0, e1, e2) = (
+                    edge(p[0], p[1], q),
+                    edge(p[1], p[2], q),
+                    edge(p[2], p[0], q),
+                );
                 if (e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0) || (e0 <= 0.0 && e1 <= 0.0 && e2 <= 0.0) {
                     self.blend(x, y, c, alpha);
                 }
@@ -157,7 +180,10 @@ impl Canvas {
 
     /// Writes the canvas as a PNG file atomically (temporary file, fsync, rename).
     pub fn save_png(&self, path: &Path) -> Result<(), SimError> {
-        let bytes = self.encode_png().map_err(|message| SimError::Png { path: path.display().to_string(), message })?;
+        let bytes = self.encode_png().map_err(|message| SimError::Png {
+            path: path.display().to_string(),
+            message,
+        })?;
         write_atomic(path, &bytes)
     }
 }
@@ -166,10 +192,19 @@ impl Canvas {
 /// directory, fsync, rename. A crash leaves the old file or the new one,
 /// never a torn one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SimError> {
-    let io = |e: std::io::Error| SimError::Io { path: path.display().to_string(), source: e };
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let io = |e: std::io::Error| SimError::Io {
+        path: path.display().to_string(),
+        source: e,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io)?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
@@ -196,19 +231,44 @@ pub fn draw_grid(canvas: &mut Canvas, cells: &[u8], width: usize, ox: usize, oy:
         match o {
             Object::Ball => {
                 canvas.fill_rect(x, y, p, p, object_color(Object::Floor), 1.0);
-                canvas.fill_disc(x as f32 + p as f32 / 2.0, y as f32 + p as f32 / 2.0, p as f32 * 0.32, object_color(o), 1.0);
+                canvas.fill_disc(
+                    x as f32 + p as f32 / 2.0,
+                    y as f32 + p as f32 / 2.0,
+                    p as f32 * 0.32,
+                    object_color(o),
+                    1.0,
+                );
             }
             Object::Key => {
                 canvas.fill_rect(x, y, p, p, object_color(Object::Floor), 1.0);
                 let s = p as f32;
-                canvas.fill_disc(x as f32 + s * 0.35, y as f32 + s * 0.35, s * 0.18, object_color(o), 1.0);
-                canvas.line((x as f32 + s * 0.4, y as f32 + s * 0.4), (x as f32 + s * 0.8, y as f32 + s * 0.8), s * 0.12, object_color(o), 1.0);
+                canvas.fill_disc(
+                    x as f32 + s * 0.35,
+                    y as f32 + s * 0.35,
+                    s * 0.18,
+                    object_color(o),
+                    1.0,
+                );
+                canvas.line(
+                    (x as f32 + s * 0.4, y as f32 + s * 0.4),
+                    (x as f32 + s * 0.8, y as f32 + s * 0.8),
+                    s * 0.12,
+                    object_color(o),
+                    1.0,
+                );
             }
             _ => canvas.fill_rect(x, y, p, p, object_color(o), 1.0),
         }
         if o == Object::DoorLocked || o == Object::DoorClosed {
             let q = (p / 6).max(1);
-            canvas.fill_rect(x + q, y + p / 2 - q / 2, p - 2 * q, q.max(1), [60, 40, 10], 1.0);
+            canvas.fill_rect(
+                x + q,
+                y + p / 2 - q / 2,
+                p - 2 * q,
+                q.max(1),
+                [60, 40, 10],
+                1.0,
+            );
         }
         // Faint grid lines make cells countable.
         if o != Object::Wall {
@@ -221,25 +281,54 @@ pub fn draw_grid(canvas: &mut Canvas, cells: &[u8], width: usize, ox: usize, oy:
 /// Draws the agent as a triangle pointing in its direction.
 pub fn draw_agent(canvas: &mut Canvas, pose: Pose, ox: usize, oy: usize, px: usize) {
     let s = px as f32;
-    let (cx, cy) = (ox as f32 + (pose.x as f32 + 0.5) * s, oy as f32 + (pose.y as f32 + 0.5) * s);
+    let (cx, cy) = (
+        ox as f32 + (pose.x as f32 + 0.5) * s,
+        oy as f32 + (pose.y as f32 + 0.5) * s,
+    );
     let (dx, dy) = Pose::DIR_VEC[(pose.dir & 3) as usize];
     let (dx, dy) = (dx as f32, dy as f32);
     let tip = (cx + dx * s * 0.38, cy + dy * s * 0.38);
     let back = (cx - dx * s * 0.32, cy - dy * s * 0.32);
     let side = (-dy * s * 0.3, dx * s * 0.3);
-    canvas.fill_triangle([tip, (back.0 + side.0, back.1 + side.1), (back.0 - side.0, back.1 - side.1)], AGENT_COLOR, 1.0);
+    canvas.fill_triangle(
+        [
+            tip,
+            (back.0 + side.0, back.1 + side.1),
+            (back.0 - side.0, back.1 - side.1),
+        ],
+        AGENT_COLOR,
+        1.0,
+    );
 }
 
 /// A canvas with one environment's grid and agent.
 pub fn render_env(cells: &[u8], width: usize, height: usize, meta: &EnvMeta, px: usize) -> Canvas {
     let mut c = Canvas::new(width * px, height * px, [255, 255, 255]);
     draw_grid(&mut c, cells, width, 0, 0, px);
-    draw_agent(&mut c, Pose { x: meta.x, y: meta.y, dir: meta.dir }, 0, 0, px);
+    draw_agent(
+        &mut c,
+        Pose {
+            x: meta.x,
+            y: meta.y,
+            dir: meta.dir,
+        },
+        0,
+        0,
+        px,
+    );
     c
 }
 
 /// A canvas tiling the first `count` environments of a batch output, `cols` per row.
-pub fn render_batch(cells: &[u8], meta: &[EnvMeta], width: usize, height: usize, count: usize, cols: usize, px: usize) -> Canvas {
+pub fn render_batch(
+    cells: &[u8],
+    meta: &[EnvMeta],
+    width: usize,
+    height: usize,
+    count: usize,
+    cols: usize,
+    px: usize,
+) -> Canvas {
     let count = count.min(meta.len()).max(1);
     let cols = cols.clamp(1, count);
     let rows = count.div_ceil(cols);

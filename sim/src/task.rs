@@ -36,7 +36,12 @@ pub enum Task {
 
 impl Task {
     /// All tasks.
-    pub const ALL: [Task; 4] = [Task::MultiGoal, Task::MultiGoalSparse, Task::MultiGoalStochastic, Task::DoorKey];
+    pub const ALL: [Task; 4] = [
+        Task::MultiGoal,
+        Task::MultiGoalSparse,
+        Task::MultiGoalStochastic,
+        Task::DoorKey,
+    ];
 
     /// Command-line name.
     pub fn name(self) -> &'static str {

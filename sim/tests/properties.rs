@@ -14,7 +14,9 @@ fn layout_strategy() -> impl Strategy<Value = Layout> {
             rng
         };
         let mut text = String::new();
-        let inner: Vec<(usize, usize)> = (1..h - 1).flat_map(|y| (1..w - 1).map(move |x| (x, y))).collect();
+        let inner: Vec<(usize, usize)> = (1..h - 1)
+            .flat_map(|y| (1..w - 1).map(move |x| (x, y)))
+            .collect();
         let start = inner[(next() % inner.len() as u64) as usize];
         let exit = inner[(next() % inner.len() as u64) as usize];
         if start == exit {

@@ -6,7 +6,12 @@ use sim::{AutoReset, BallSpawn, Env, EnvConfig, EnvMeta, Layout, Object, Pose, T
 
 fn env(text: &str, task: Task) -> Env {
     let layout = Layout::parse("test", text).expect("valid layout");
-    let cfg = EnvConfig { task, max_steps: 100, balls: BallSpawn::Layout, auto_reset: AutoReset::Off };
+    let cfg = EnvConfig {
+        task,
+        max_steps: 100,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::Off,
+    };
     Env::new(layout, cfg, 7, 0)
 }
 
@@ -75,7 +80,11 @@ fn pickup_and_drop_rules() {
     e.step_meta(FORWARD);
     assert_eq!(at(&e).0, 3);
     e.step_meta(PICKUP);
-    assert_eq!(e.carrying(), Some(Object::Key), "hands full: the ball stays");
+    assert_eq!(
+        e.carrying(),
+        Some(Object::Key),
+        "hands full: the ball stays"
+    );
     assert_eq!(e.grid()[11], Object::Ball as u8);
     // Drop only onto empty floor.
     e.step_meta(DROP);
@@ -93,16 +102,32 @@ fn pickup_and_drop_rules() {
 fn locked_doors_need_the_key_and_door_key_rewards_once() {
     let mut e = env("########\n#K>D..E#\n########\n", Task::DoorKey);
     let m = e.step_meta(TOGGLE);
-    assert_eq!(e.grid()[11], Object::DoorLocked as u8, "no key: stays locked");
+    assert_eq!(
+        e.grid()[11],
+        Object::DoorLocked as u8,
+        "no key: stays locked"
+    );
     assert!((m.reward - -0.01).abs() < CLOSE);
     run(&mut e, &[LEFT, LEFT, PICKUP, RIGHT, RIGHT]);
     assert_eq!(e.carrying(), Some(Object::Key));
     let m = e.step_meta(TOGGLE);
-    assert_eq!(e.grid()[11], Object::DoorOpen as u8, "the key unlocks and opens");
-    assert!((m.reward - 0.99).abs() < CLOSE, "door opened: +1 - 0.01, got {}", m.reward);
+    assert_eq!(
+        e.grid()[11],
+        Object::DoorOpen as u8,
+        "the key unlocks and opens"
+    );
+    assert!(
+        (m.reward - 0.99).abs() < CLOSE,
+        "door opened: +1 - 0.01, got {}",
+        m.reward
+    );
     assert_eq!(e.carrying(), Some(Object::Key), "the key is kept");
     let m = e.step_meta(TOGGLE);
-    assert_eq!(e.grid()[11], Object::DoorClosed as u8, "an unlocked door closes");
+    assert_eq!(
+        e.grid()[11],
+        Object::DoorClosed as u8,
+        "an unlocked door closes"
+    );
     assert!((m.reward - -0.01).abs() < CLOSE);
     let m = e.step_meta(TOGGLE);
     assert!((m.reward - -0.01).abs() < CLOSE, "re-opening pays nothing");
@@ -112,7 +137,11 @@ fn locked_doors_need_the_key_and_door_key_rewards_once() {
     assert!((last.reward - 0.99).abs() < CLOSE, "exit: +1");
     // 13 actions: 2 rewards of +1, 13 penalties of 0.01.
     let total: f32 = 2.0 - 0.01 * 13.0;
-    assert!((last.episode_return - total).abs() < 1e-4, "{} vs {total}", last.episode_return);
+    assert!(
+        (last.episode_return - total).abs() < 1e-4,
+        "{} vs {total}",
+        last.episode_return
+    );
     assert_eq!(last.episode_len, 13);
 }
 
@@ -121,7 +150,10 @@ fn multigoal_collects_balls_by_stepping_on_them_and_ends_at_the_exit() {
     let mut e = env("#######\n#>BB.E#\n#######\n", Task::MultiGoal);
     let ms = run(&mut e, &[FORWARD, FORWARD, FORWARD, FORWARD]);
     let r: Vec<f32> = ms.iter().map(|m| m.reward).collect();
-    assert!((r[0] - 0.99).abs() < CLOSE && (r[1] - 0.99).abs() < CLOSE, "{r:?}");
+    assert!(
+        (r[0] - 0.99).abs() < CLOSE && (r[1] - 0.99).abs() < CLOSE,
+        "{r:?}"
+    );
     assert!((r[2] - -0.01).abs() < CLOSE);
     assert!((r[3] - 0.99).abs() < CLOSE);
     assert_eq!(ms[3].flags & flags::DONE, flags::TERMINATED);
@@ -134,28 +166,54 @@ fn multigoal_sparse_pays_only_at_the_exit_in_proportion_to_balls() {
     let mut e = env("########\n#>B.B.E#\n########\n", Task::MultiGoalSparse);
     let ms = run(&mut e, &[FORWARD, FORWARD, FORWARD, FORWARD, FORWARD]);
     for m in &ms[..4] {
-        assert!((m.reward - -0.01).abs() < CLOSE, "no reward before the exit");
+        assert!(
+            (m.reward - -0.01).abs() < CLOSE,
+            "no reward before the exit"
+        );
     }
     // Exit with 2 of 2 balls: 2/2 = 1.
     assert!((ms[4].reward - 0.99).abs() < CLOSE, "{}", ms[4].reward);
-    let mut e = env("########\n#>....E#\n#.B.B..#\n########\n", Task::MultiGoalSparse);
+    let mut e = env(
+        "########\n#>....E#\n#.B.B..#\n########\n",
+        Task::MultiGoalSparse,
+    );
     // Down to (1,2), right onto the ball at (2,2), up to (2,1), then right to the exit.
-    let ms = run(&mut e, &[RIGHT, FORWARD, LEFT, FORWARD, LEFT, FORWARD, RIGHT, FORWARD, FORWARD, FORWARD, FORWARD]);
+    let ms = run(
+        &mut e,
+        &[
+            RIGHT, FORWARD, LEFT, FORWARD, LEFT, FORWARD, RIGHT, FORWARD, FORWARD, FORWARD, FORWARD,
+        ],
+    );
     let last = ms.iter().find(|m| m.done()).expect("reached the exit");
     assert_eq!(last.balls, 1);
-    assert!((last.reward - (0.5 - 0.01)).abs() < CLOSE, "1 of 2 balls: 0.5, got {}", last.reward);
+    assert!(
+        (last.reward - (0.5 - 0.01)).abs() < CLOSE,
+        "1 of 2 balls: 0.5, got {}",
+        last.reward
+    );
 }
 
 #[test]
 fn multigoal_stochastic_moves_lava_every_step_and_lava_ends_with_minus_half() {
     let layout = Layout::parse("t", "#######\n#>....#\n#....E#\n#######\n").unwrap();
-    let cfg = EnvConfig { task: Task::MultiGoalStochastic, max_steps: 100, balls: BallSpawn::Layout, auto_reset: AutoReset::Off };
+    let cfg = EnvConfig {
+        task: Task::MultiGoalStochastic,
+        max_steps: 100,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::Off,
+    };
     let mut e = Env::new(layout.clone(), cfg, 3, 0);
     let lava_at = |e: &Env| e.grid().iter().position(|&c| c == Object::Lava as u8);
     let mut positions = std::collections::HashSet::new();
     for _ in 0..40 {
         let l = lava_at(&e).expect("one lava block at all times");
-        assert_eq!(e.grid().iter().filter(|&&c| c == Object::Lava as u8).count(), 1);
+        assert_eq!(
+            e.grid()
+                .iter()
+                .filter(|&&c| c == Object::Lava as u8)
+                .count(),
+            1
+        );
         assert_ne!(l, e.cell(), "lava never spawns under the agent");
         positions.insert(l);
         e.step_meta(LEFT);
@@ -179,17 +237,34 @@ fn multigoal_stochastic_moves_lava_every_step_and_lava_ends_with_minus_half() {
 #[test]
 fn truncation_is_reported_apart_from_termination_and_auto_reset_restarts() {
     let layout = Layout::parse("t", "#####\n#>.E#\n#####\n").unwrap();
-    let cfg = EnvConfig { task: Task::MultiGoal, max_steps: 3, balls: BallSpawn::Layout, auto_reset: AutoReset::SameStep };
+    let cfg = EnvConfig {
+        task: Task::MultiGoal,
+        max_steps: 3,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::SameStep,
+    };
     let mut e = Env::new(layout, cfg, 1, 0);
     let ms = run(&mut e, &[LEFT, LEFT, LEFT]);
     assert_eq!(ms[2].flags & flags::DONE, flags::TRUNCATED);
     assert!(ms[2].flags & flags::RESET != 0, "same-step auto-reset");
     assert_eq!(ms[2].episode_len, 3);
     assert!((ms[2].episode_return - -0.03).abs() < CLOSE);
-    assert_eq!((ms[2].x, ms[2].y, ms[2].dir), (1, 1, 0), "the returned pose is the new episode's start");
+    assert_eq!(
+        (ms[2].x, ms[2].y, ms[2].dir),
+        (1, 1, 0),
+        "the returned pose is the new episode's start"
+    );
     assert_eq!(e.steps(), 0);
     // Terminating on the last allowed step is a termination, not a truncation.
-    let mut e2 = Env::new(Layout::parse("t", "#####\n#>.E#\n#####\n").unwrap(), EnvConfig { max_steps: 2, ..cfg }, 1, 0);
+    let mut e2 = Env::new(
+        Layout::parse("t", "#####\n#>.E#\n#####\n").unwrap(),
+        EnvConfig {
+            max_steps: 2,
+            ..cfg
+        },
+        1,
+        0,
+    );
     let ms = run(&mut e2, &[FORWARD, FORWARD]);
     assert_eq!(ms[1].flags & flags::DONE, flags::TERMINATED);
 }
@@ -199,7 +274,10 @@ fn auto_reset_off_holds_the_final_state_until_reset() {
     let mut e = env("#####\n#>.E#\n#####\n", Task::MultiGoal);
     let ms = run(&mut e, &[FORWARD, FORWARD, FORWARD, LEFT]);
     assert!(ms[1].terminated());
-    assert!(ms[2].terminated() && ms[2].reward == 0.0, "a finished env repeats its final flags");
+    assert!(
+        ms[2].terminated() && ms[2].reward == 0.0,
+        "a finished env repeats its final flags"
+    );
     assert_eq!((ms[3].x, ms[3].y), (3, 1));
     let mut cells = vec![0; 15];
     let mut meta = EnvMeta::EMPTY;
@@ -217,7 +295,9 @@ fn random_balls_spawn_on_free_floor_each_episode() {
     let mut seen = std::collections::HashSet::new();
     for i in 0..20 {
         let e = Env::new(layout.clone(), cfg, 11, i);
-        let balls: Vec<usize> = (0..e.grid().len()).filter(|&c| e.grid()[c] == Object::Ball as u8).collect();
+        let balls: Vec<usize> = (0..e.grid().len())
+            .filter(|&c| e.grid()[c] == Object::Ball as u8)
+            .collect();
         assert_eq!(balls.len(), 5, "five balls");
         for &b in &balls {
             assert_eq!(layout.cells[b], Object::Floor as u8, "balls only on floor");
@@ -225,7 +305,10 @@ fn random_balls_spawn_on_free_floor_each_episode() {
         }
         seen.insert(balls);
     }
-    assert!(seen.len() > 15, "different environments get different balls");
+    assert!(
+        seen.len() > 15,
+        "different environments get different balls"
+    );
 }
 
 #[test]

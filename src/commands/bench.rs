@@ -137,11 +137,15 @@ pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
     let obs_bytes_per_step = cpe + std::mem::size_of::<EnvMeta>();
     let src: Vec<u8> = (0..n * obs_bytes_per_step).map(|i| i as u8).collect();
     let mut dst = vec![0u8; n * obs_bytes_per_step];
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads)
+        .build()?;
     let chunk = n.div_ceil(a.threads * 4).max(16) * obs_bytes_per_step;
     let copy = |dst: &mut [u8]| {
         pool.install(|| {
-            dst.par_chunks_mut(chunk).zip(src.par_chunks(chunk)).for_each(|(d, s)| d.copy_from_slice(s));
+            dst.par_chunks_mut(chunk)
+                .zip(src.par_chunks(chunk))
+                .for_each(|(d, s)| d.copy_from_slice(s));
         });
         std::hint::black_box(&dst);
     };
@@ -156,7 +160,8 @@ pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
             copies += 1;
         }
     }
-    let memcpy_bytes_per_sec = (copies * (n * obs_bytes_per_step) as u64) as f64 / t0.elapsed().as_secs_f64();
+    let memcpy_bytes_per_sec =
+        (copies * (n * obs_bytes_per_step) as u64) as f64 / t0.elapsed().as_secs_f64();
 
     // One environment on one thread.
     let mut single = BatchEnv::new(layout, cfg, 1, a.world.seed, 1)?;
@@ -189,17 +194,39 @@ pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
 
 /// Prints the `bench sim` summary table.
 pub fn print_sim_report(r: &SimBenchReport) {
-    println!("bench sim: {} maze, {}, {} envs, {} threads", r.maze, r.task, r.envs, r.threads);
+    println!(
+        "bench sim: {} maze, {}, {} envs, {} threads",
+        r.maze, r.task, r.envs, r.threads
+    );
     println!("  {:<34} {:>16}", "measure", "value");
-    println!("  {:<34} {:>16.2}M", "batched env-steps/s", r.steps_per_sec / 1e6);
-    println!("  {:<34} {:>16}", "observation bytes per env-step", r.obs_bytes_per_step);
-    println!("  {:<34} {:>16.2}", "memcpy of the same bytes (GB/s)", r.memcpy_bytes_per_sec / 1e9);
+    println!(
+        "  {:<34} {:>16.2}M",
+        "batched env-steps/s",
+        r.steps_per_sec / 1e6
+    );
+    println!(
+        "  {:<34} {:>16}",
+        "observation bytes per env-step", r.obs_bytes_per_step
+    );
+    println!(
+        "  {:<34} {:>16.2}",
+        "memcpy of the same bytes (GB/s)",
+        r.memcpy_bytes_per_sec / 1e9
+    );
     println!(
         "  {:<34} {:>16.2}M",
         "memcpy bound (env-steps/s)",
         r.memcpy_bytes_per_sec / r.obs_bytes_per_step as f64 / 1e6
     );
-    println!("  {:<34} {:>16.1}%", "ratio to the memcpy bound", r.ratio_to_memcpy_bound * 100.0);
-    println!("  {:<34} {:>16.2}M", "single env, one thread (steps/s)", r.single_env_steps_per_sec / 1e6);
+    println!(
+        "  {:<34} {:>16.1}%",
+        "ratio to the memcpy bound",
+        r.ratio_to_memcpy_bound * 100.0
+    );
+    println!(
+        "  {:<34} {:>16.2}M",
+        "single env, one thread (steps/s)",
+        r.single_env_steps_per_sec / 1e6
+    );
     println!("  {:<34} {:>16}", "episodes finished", r.episodes);
 }

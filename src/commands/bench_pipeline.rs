@@ -27,9 +27,9 @@ use sim::{BatchEnv, StepOut};
 
 use super::run::{RunCmdArgs, teardown};
 use crate::latency::Latencies;
-use crate::roles::{OnPeerDeath, RunArgs};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
+use crate::roles::{OnPeerDeath, RunArgs};
 use crate::world::WorldArgs;
 
 /// `bench pipeline` options.
@@ -107,15 +107,39 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
     if a.json {
         println!("{}", serde_json::to_string(&r)?);
     } else {
-        println!("bench pipeline: {} maze, {} envs, {} sim thread(s), null policy", r.maze, r.envs, a.threads);
+        println!(
+            "bench pipeline: {} maze, {} envs, {} sim thread(s), null policy",
+            r.maze, r.envs, a.threads
+        );
         println!("  {:<36} {:>14} {:>10}", "setup", "env-steps/s", "ratio");
-        println!("  {:<36} {:>13.2}M {:>10}", "in-process (no IPC)", r.inprocess_steps_per_sec / 1e6, "1.00");
-        println!("  {:<36} {:>13.2}M {:>10.2}", "3 processes, iceoryx2 shared memory", r.ipc_steps_per_sec / 1e6, r.ipc_to_inprocess);
-        println!("  {:<36} {:>13.2}M {:>10.2}", "3 processes, Unix sockets (copying)", r.socket_steps_per_sec / 1e6, socket / inprocess);
+        println!(
+            "  {:<36} {:>13.2}M {:>10}",
+            "in-process (no IPC)",
+            r.inprocess_steps_per_sec / 1e6,
+            "1.00"
+        );
+        println!(
+            "  {:<36} {:>13.2}M {:>10.2}",
+            "3 processes, iceoryx2 shared memory",
+            r.ipc_steps_per_sec / 1e6,
+            r.ipc_to_inprocess
+        );
+        println!(
+            "  {:<36} {:>13.2}M {:>10.2}",
+            "3 processes, Unix sockets (copying)",
+            r.socket_steps_per_sec / 1e6,
+            socket / inprocess
+        );
         println!("  {:<36} {:>14.2}", "ipc / socket", r.ipc_to_socket);
         println!("  round trip (us)            p50        p99      p99.9");
-        println!("  shared memory       {:>10.2} {:>10.2} {:>10.2}", r.roundtrip_p50_us, r.roundtrip_p99_us, r.roundtrip_p999_us);
-        println!("  unix socket         {:>10.2} {:>10.2}", r.socket_roundtrip_p50_us, r.socket_roundtrip_p99_us);
+        println!(
+            "  shared memory       {:>10.2} {:>10.2} {:>10.2}",
+            r.roundtrip_p50_us, r.roundtrip_p99_us, r.roundtrip_p999_us
+        );
+        println!(
+            "  unix socket         {:>10.2} {:>10.2}",
+            r.socket_roundtrip_p50_us, r.socket_roundtrip_p99_us
+        );
         println!("  batches lost over shared memory: {}", r.ipc_batches_lost);
     }
     Ok(std::process::ExitCode::SUCCESS)
@@ -147,7 +171,13 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
     let run = format!("bench-{}", std::process::id());
     let args = RunCmdArgs {
         world: a.world.clone(),
-        graph: GraphArgs { nodes: 32, node_file: None, walks_per_node: 64, walk_len: 64, graph_seed: None },
+        graph: GraphArgs {
+            nodes: 32,
+            node_file: None,
+            walks_per_node: 64,
+            walk_len: 64,
+            graph_seed: None,
+        },
         run: RunArgs {
             run: run.clone(),
             run_dir: Some(dir.path().to_path_buf()),
@@ -166,19 +196,34 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
     p.stop_all(Duration::from_secs(3));
     teardown(&run)?;
     let stats = std::fs::File::open(dir.path().join("sim.stats.jsonl"))?;
-    let lines: Vec<serde_json::Value> =
-        std::io::BufReader::new(stats).lines().map_while(Result::ok).filter_map(|l| serde_json::from_str(&l).ok()).collect();
+    let lines: Vec<serde_json::Value> = std::io::BufReader::new(stats)
+        .lines()
+        .map_while(Result::ok)
+        .filter_map(|l| serde_json::from_str(&l).ok())
+        .collect();
     let first = lines.iter().find(|l| l["t"].as_f64().unwrap_or(0.0) >= 1.0);
     let (Some(first), Some(last)) = (first, lines.last()) else {
-        anyhow::bail!("the pipeline made no progress; see {}", dir.path().display());
+        anyhow::bail!(
+            "the pipeline made no progress; see {}",
+            dir.path().display()
+        );
     };
     let dt = last["t"].as_f64().unwrap_or(0.0) - first["t"].as_f64().unwrap_or(0.0);
     let dseq = last["seq"].as_u64().unwrap_or(0) - first["seq"].as_u64().unwrap_or(0);
-    anyhow::ensure!(dt > 0.0, "the pipeline ran for less than two stats intervals");
-    let sim: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("sim.report.json"))?)?;
+    anyhow::ensure!(
+        dt > 0.0,
+        "the pipeline ran for less than two stats intervals"
+    );
+    let sim: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("sim.report.json"))?)?;
     let pct = |k: &str| sim[k].as_f64().unwrap_or(f64::NAN);
-    let hgrm = (pct("roundtrip_p50_us"), pct("roundtrip_p99_us"), pct("roundtrip_p999_us"));
-    let learner: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
+    let hgrm = (
+        pct("roundtrip_p50_us"),
+        pct("roundtrip_p99_us"),
+        pct("roundtrip_p999_us"),
+    );
+    let learner: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
     let lost = learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX);
     Ok((dseq as f64 * a.envs as f64 / dt, hgrm, lost))
 }
@@ -196,8 +241,20 @@ fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
         let path: PathBuf = dir.path().join(format!("{role}.sock"));
         let listener = UnixListener::bind(&path)?;
         let child = Command::new(&exe)
-            .args(["bench", "socket-peer", "--socket", &path.display().to_string(), "--role", role])
-            .args(["--frame-bytes", &frame.to_string(), "--envs", &a.envs.to_string()])
+            .args([
+                "bench",
+                "socket-peer",
+                "--socket",
+                &path.display().to_string(),
+                "--role",
+                role,
+            ])
+            .args([
+                "--frame-bytes",
+                &frame.to_string(),
+                "--envs",
+                &a.envs.to_string(),
+            ])
             .args(["--num-actions", &cfg.task.num_actions().to_string()])
             .stdin(Stdio::null())
             .spawn()?;
@@ -225,7 +282,13 @@ fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
             (&*planner).write_all(&out)?;
             (&*learner).read_exact(&mut actions)?;
             lat.record("round_trip", t0.elapsed().as_nanos() as u64);
-            batch.step(&actions, StepOut { cells: &mut buf.cells, meta: &mut buf.meta });
+            batch.step(
+                &actions,
+                StepOut {
+                    cells: &mut buf.cells,
+                    meta: &mut buf.meta,
+                },
+            );
             n += 1;
         }
         Ok(n)
@@ -239,7 +302,13 @@ fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
     for mut c in peers {
         let _ = c.wait();
     }
-    Ok((sps, (lat.percentile_us("round_trip", 50.0), lat.percentile_us("round_trip", 99.0))))
+    Ok((
+        sps,
+        (
+            lat.percentile_us("round_trip", 50.0),
+            lat.percentile_us("round_trip", 99.0),
+        ),
+    ))
 }
 
 /// `bench socket-peer` (internal): the learner or planner end of the socket transport.
@@ -272,10 +341,17 @@ pub fn socket_peer(a: SocketPeerArgs) -> anyhow::Result<std::process::ExitCode> 
     let mut actions = vec![0u8; a.envs];
     let mut visits = 0u64;
     while s.read_exact(frame).is_ok() {
-        let metas: &[EnvMeta] = bytemuck::cast_slice(&frame[8..8 + a.envs * std::mem::size_of::<EnvMeta>()]);
+        let metas: &[EnvMeta] =
+            bytemuck::cast_slice(&frame[8..8 + a.envs * std::mem::size_of::<EnvMeta>()]);
         visits += metas.len() as u64;
         if a.role == "learner" {
-            let view = learner::batch_env::ObsView { seq: 0, cells: &[], meta: metas, width: 0, height: 0 };
+            let view = learner::batch_env::ObsView {
+                seq: 0,
+                cells: &[],
+                meta: metas,
+                width: 0,
+                height: 0,
+            };
             policy.act(&view, &mut actions);
             s.write_all(&actions)?;
         }

@@ -62,7 +62,14 @@ pub struct PlannerBenchReport {
 }
 
 /// Node path by Dijkstra over the edge list (the baseline).
-fn dijkstra(adj: &[Vec<(u16, u32)>], a: usize, b: usize, dist: &mut [u32], prev: &mut [u16], path: &mut Vec<u16>) -> bool {
+fn dijkstra(
+    adj: &[Vec<(u16, u32)>],
+    a: usize,
+    b: usize,
+    dist: &mut [u32],
+    prev: &mut [u16],
+    path: &mut Vec<u16>,
+) -> bool {
     dist.fill(UNREACHABLE);
     dist[a] = 0;
     let mut heap = BinaryHeap::new();
@@ -101,7 +108,11 @@ fn dijkstra(adj: &[Vec<(u16, u32)>], a: usize, b: usize, dist: &mut [u32], prev:
 pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
     let layout = a.maze.layout(false);
     let free = layout.free_cells().len();
-    anyhow::ensure!(a.nodes >= 2 && a.nodes <= free, "--nodes must be in 2..={free} for the {} maze", a.maze);
+    anyhow::ensure!(
+        a.nodes >= 2 && a.nodes <= free,
+        "--nodes must be in 2..={free} for the {} maze",
+        a.maze
+    );
     let cfg = PlannerConfig {
         candidates: CandidateSet::Random { k: a.nodes },
         seed: a.seed,
@@ -124,17 +135,25 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
 
     let n = graph.num_nodes();
     let mut rng = SmallRng::seed_from_u64(a.seed ^ 0xbe4c);
-    let pairs: Vec<(usize, usize)> = std::iter::repeat_with(|| (rng.random_range(0..n), rng.random_range(0..n)))
-        .filter(|&(x, y)| x != y && graph.distance(NodeId(x as u16), NodeId(y as u16)) != UNREACHABLE)
-        .take(a.queries.min(1_000_000))
-        .collect();
+    let pairs: Vec<(usize, usize)> =
+        std::iter::repeat_with(|| (rng.random_range(0..n), rng.random_range(0..n)))
+            .filter(|&(x, y)| {
+                x != y && graph.distance(NodeId(x as u16), NodeId(y as u16)) != UNREACHABLE
+            })
+            .take(a.queries.min(1_000_000))
+            .collect();
     anyhow::ensure!(!pairs.is_empty(), "no connected node pairs in this graph");
 
     let mut lat = Latencies::new("planner");
     let mut route = Route::with_capacity(shm_schemas::MAX_ROUTE_LEN, shm_schemas::MAX_ROUTE_PIVOTS);
     for (i, &(x, y)) in pairs.iter().enumerate() {
         let t = Instant::now();
-        let r = graph.route_into(NodeId(x as u16), (i % 4) as u8, NodeId(y as u16), &mut route);
+        let r = graph.route_into(
+            NodeId(x as u16),
+            (i % 4) as u8,
+            NodeId(y as u16),
+            &mut route,
+        );
         lat.record("dp_route", t.elapsed().as_nanos() as u64);
         std::hint::black_box(r.ok());
     }
@@ -159,7 +178,8 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
         route_p999_us: lat.percentile_us("dp_route", 99.9),
         dijkstra_p50_us: lat.percentile_us("dijkstra_baseline", 50.0),
         dijkstra_p99_us: lat.percentile_us("dijkstra_baseline", 99.0),
-        speedup_p50: lat.percentile_us("dijkstra_baseline", 50.0) / lat.percentile_us("dp_route", 50.0),
+        speedup_p50: lat.percentile_us("dijkstra_baseline", 50.0)
+            / lat.percentile_us("dp_route", 50.0),
     };
     if a.json {
         println!("{}", serde_json::to_string(&r)?);
@@ -168,9 +188,15 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
             "bench planner: {} maze, {} nodes, {} edges, graph built in {:.2} s",
             a.maze, r.nodes, r.edges, r.build_seconds
         );
-        println!("  all-pairs shortest paths rebuild (Floyd-Warshall): {:.2} ms (median of 5)", r.rebuild_ms);
+        println!(
+            "  all-pairs shortest paths rebuild (Floyd-Warshall): {:.2} ms (median of 5)",
+            r.rebuild_ms
+        );
         print!("{}", lat.table());
-        println!("  DP route (nodes+cells+actions) vs Dijkstra node path, p50 speed-up: {:.1}x", r.speedup_p50);
+        println!(
+            "  DP route (nodes+cells+actions) vs Dijkstra node path, p50 speed-up: {:.1}x",
+            r.speedup_p50
+        );
     }
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -25,7 +25,14 @@ pub struct DemoArgs {
 /// Renders the medium maze (ASCII and PNG, plus a grid of 16 episodes'
 /// starts) and measures batched simulation throughput.
 pub fn run(a: DemoArgs) -> anyhow::Result<std::process::ExitCode> {
-    let world = WorldArgs { maze: Maze::Medium, layout: None, task: Task::MultiGoal, seed: a.seed, max_steps: None, balls: None };
+    let world = WorldArgs {
+        maze: Maze::Medium,
+        layout: None,
+        task: Task::MultiGoal,
+        seed: a.seed,
+        max_steps: None,
+        balls: None,
+    };
     let (layout, cfg) = world.build()?;
     let (w, h) = (layout.width, layout.height);
     let mut batch = BatchEnv::new(layout, cfg, 16, a.seed, 1)?;
@@ -37,7 +44,13 @@ pub fn run(a: DemoArgs) -> anyhow::Result<std::process::ExitCode> {
     let grid = a.out.join("medium-multigoal-batch.png");
     render::render_batch(&buf.cells, &buf.meta, w, h, 16, 4, 12).save_png(&grid)?;
     println!("wrote {} and {}", one.display(), grid.display());
-    let r = bench_sim(&BenchSimArgs { world, envs: 1024, threads: 2, seconds: a.seconds, json: false })?;
+    let r = bench_sim(&BenchSimArgs {
+        world,
+        envs: 1024,
+        threads: 2,
+        seconds: a.seconds,
+        json: false,
+    })?;
     print_sim_report(&r);
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -119,11 +119,15 @@ fn world(a: &DiscoverArgs) -> WorldArgs {
 pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let w = world(&a);
     let (layout, env_cfg) = w.build()?;
-    let dir = a.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, a.seed)));
+    let dir = a.run_dir.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, a.seed))
+    });
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let mut cfg: DiscoveryConfig = match &a.config {
-        Some(p) => serde_json::from_slice(&std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?)
-            .with_context(|| format!("{} is not a valid discovery config", p.display()))?,
+        Some(p) => serde_json::from_slice(
+            &std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?,
+        )
+        .with_context(|| format!("{} is not a valid discovery config", p.display()))?,
         None => DiscoveryConfig::default(),
     };
     cfg.seed = a.seed;
@@ -140,16 +144,34 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut disc = Discovery::new(cfg, &layout, a.envs, num_actions)?;
     let ckpt = dir.join("checkpoint");
     if disc.resume(&ckpt)? {
-        eprintln!("discover: resuming {} after round {}", dir.display(), disc.rounds_done());
+        eprintln!(
+            "discover: resuming {} after round {}",
+            dir.display(),
+            disc.rounds_done()
+        );
     }
 
-    let (summary_transport, run_name) = if a.pipeline { ("pipeline", format!("discover-{}", std::process::id())) } else { ("in-process", String::new()) };
+    let (summary_transport, run_name) = if a.pipeline {
+        ("pipeline", format!("discover-{}", std::process::id()))
+    } else {
+        ("in-process", String::new())
+    };
     let mut pipeline = None;
     let mut env: Box<dyn BatchEnvironment> = if a.pipeline {
         let mut words = vec!["sim".to_string(), "serve".into()];
         words.extend(world_words(&w));
-        words.extend(["--run".into(), run_name.clone(), "--run-dir".into(), dir.display().to_string()]);
-        words.extend(["--envs".into(), a.envs.to_string(), "--on-peer-death".into(), "exit".into()]);
+        words.extend([
+            "--run".into(),
+            run_name.clone(),
+            "--run-dir".into(),
+            dir.display().to_string(),
+        ]);
+        words.extend([
+            "--envs".into(),
+            a.envs.to_string(),
+            "--on-peer-death".into(),
+            "exit".into(),
+        ]);
         let mut p = Pipeline::new(vec![(Role::Sim, words)], Some(&dir))?;
         p.spawn(Role::Sim)?;
         pipeline = Some(p);
@@ -161,7 +183,13 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
             connect_timeout: Duration::from_secs(60),
             ..ShmEnvOptions::default()
         };
-        Box::new(ShmEnv::<ipc::Service>::connect(&run_config(&run)?, run, shape, num_actions, opts)?)
+        Box::new(ShmEnv::<ipc::Service>::connect(
+            &run_config(&run)?,
+            run,
+            shape,
+            num_actions,
+            opts,
+        )?)
     } else {
         Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, a.seed, 1)?)
     };
@@ -169,8 +197,10 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let total = disc.config().max_rounds as u64;
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("discover {bar:30} round {pos}/{len} {elapsed_precise} {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        indicatif::ProgressStyle::with_template(
+            "discover {bar:30} round {pos}/{len} {elapsed_precise} {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     bar.set_position(disc.rounds_done() as u64);
     while !disc.finished() {
@@ -195,7 +225,12 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let cells: Vec<[u16; 2]> = disc
         .pivotal_states()
         .iter()
-        .map(|&c| [(c as usize % layout.width) as u16, (c as usize / layout.width) as u16])
+        .map(|&c| {
+            [
+                (c as usize % layout.width) as u16,
+                (c as usize / layout.width) as u16,
+            ]
+        })
         .collect();
     sim::render::write_atomic(&pivotal_file, &serde_json::to_vec(&cells)?)?;
     let graph = if a.pipeline {
@@ -217,7 +252,11 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let n = graph.num_nodes();
     let connected = (0..n)
         .flat_map(|i| (0..n).map(move |j| (i, j)))
-        .filter(|&(i, j)| i != j && graph.distance(planner::NodeId(i as u16), planner::NodeId(j as u16)) != planner::UNREACHABLE)
+        .filter(|&(i, j)| {
+            i != j
+                && graph.distance(planner::NodeId(i as u16), planner::NodeId(j as u16))
+                    != planner::UNREACHABLE
+        })
         .count();
     let summary = DiscoverySummary {
         maze: layout.name.clone(),
@@ -226,7 +265,11 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         rounds: disc.rounds_done(),
         pivotal_states: pivotal.len(),
         edges: graph.edges().len(),
-        connected_pairs: if n > 1 { connected as f64 / (n * (n - 1)) as f64 } else { 0.0 },
+        connected_pairs: if n > 1 {
+            connected as f64 / (n * (n - 1)) as f64
+        } else {
+            0.0
+        },
         doorways: doorways.len(),
         doorway_fraction_of_pivotal: on_doorway as f64 / pivotal.len().max(1) as f64,
         doorway_fraction_of_cells: doorways.len() as f64 / free.max(1) as f64,
@@ -238,9 +281,15 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         train_steps_per_sec: env_steps as f64 / loop_seconds.max(1e-9),
         pivotal_cells: cells,
     };
-    sim::render::write_atomic(&dir.join("discovery.json"), &serde_json::to_vec_pretty(&summary)?)?;
-    render_pivotal(&layout, &disc.prior_means(), pivotal, &graph).save_png(&dir.join("pivotal.png"))?;
-    curves(&history).render(900, 520).save_png(&dir.join("discovery_curves.png"))?;
+    sim::render::write_atomic(
+        &dir.join("discovery.json"),
+        &serde_json::to_vec_pretty(&summary)?,
+    )?;
+    render_pivotal(&layout, &disc.prior_means(), pivotal, &graph)
+        .save_png(&dir.join("pivotal.png"))?;
+    curves(&history)
+        .render(900, 520)
+        .save_png(&dir.join("discovery_curves.png"))?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {
@@ -251,13 +300,28 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
 
 /// Has a planner process build the world graph over `V_p` (`--node-file`)
 /// and save it into the run directory, then loads it.
-fn build_graph_in_planner(a: &DiscoverArgs, w: &WorldArgs, dir: &Path, nodes: &Path) -> anyhow::Result<planner::WorldGraph> {
+fn build_graph_in_planner(
+    a: &DiscoverArgs,
+    w: &WorldArgs,
+    dir: &Path,
+    nodes: &Path,
+) -> anyhow::Result<planner::WorldGraph> {
     let run = format!("discover-graph-{}", std::process::id());
     let _ = std::fs::remove_file(dir.join("graph.json"));
     let mut words = vec!["planner".to_string(), "serve".into()];
     words.extend(world_words(w));
-    words.extend(["--run".into(), run.clone(), "--run-dir".into(), dir.display().to_string()]);
-    words.extend(["--envs".into(), a.envs.to_string(), "--node-file".into(), nodes.display().to_string()]);
+    words.extend([
+        "--run".into(),
+        run.clone(),
+        "--run-dir".into(),
+        dir.display().to_string(),
+    ]);
+    words.extend([
+        "--envs".into(),
+        a.envs.to_string(),
+        "--node-file".into(),
+        nodes.display().to_string(),
+    ]);
     words.extend(["--duration".into(), "0.5".into()]);
     let mut p = Pipeline::new(vec![(Role::Planner, words)], Some(dir))?;
     p.spawn(Role::Planner)?;
@@ -268,20 +332,51 @@ fn build_graph_in_planner(a: &DiscoverArgs, w: &WorldArgs, dir: &Path, nodes: &P
     }
     p.stop_all(Duration::from_secs(3));
     teardown(&run)?;
-    planner::WorldGraph::load(&dir.join("graph.json")).with_context(|| format!("the planner did not save a graph; see {}/planner.log", dir.display()))
+    planner::WorldGraph::load(&dir.join("graph.json")).with_context(|| {
+        format!(
+            "the planner did not save a graph; see {}/planner.log",
+            dir.display()
+        )
+    })
 }
 
 /// The maze shaded by prior mean, with `V_p` and the graph's edges.
-fn render_pivotal(layout: &Layout, prior: &[f32], pivotal: &[u32], graph: &planner::WorldGraph) -> Canvas {
+fn render_pivotal(
+    layout: &Layout,
+    prior: &[f32],
+    pivotal: &[u32],
+    graph: &planner::WorldGraph,
+) -> Canvas {
     let px = 24usize;
     let mut c = Canvas::new(layout.width * px, layout.height * px, [255, 255, 255]);
     draw_grid(&mut c, &layout.cells, layout.width, 0, 0, px);
-    let free: Vec<usize> = (0..layout.cells.len()).filter(|&i| layout.cells[i] != Object::Wall as u8).collect();
-    let (lo, hi) = free.iter().map(|&i| prior[i]).fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let free: Vec<usize> = (0..layout.cells.len())
+        .filter(|&i| layout.cells[i] != Object::Wall as u8)
+        .collect();
+    let (lo, hi) = free
+        .iter()
+        .map(|&i| prior[i])
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
     for &i in &free {
-        let t = if hi > lo { (prior[i] - lo) / (hi - lo) } else { 0.0 };
-        let (x, y) = ((i % layout.width * px) as i64, (i / layout.width * px) as i64);
-        c.fill_rect(x + 1, y + 1, px as i64 - 1, px as i64 - 1, [120, 40, 160], 0.75 * t);
+        let t = if hi > lo {
+            (prior[i] - lo) / (hi - lo)
+        } else {
+            0.0
+        };
+        let (x, y) = (
+            (i % layout.width * px) as i64,
+            (i / layout.width * px) as i64,
+        );
+        c.fill_rect(
+            x + 1,
+            y + 1,
+            px as i64 - 1,
+            px as i64 - 1,
+            [120, 40, 160],
+            0.75 * t,
+        );
     }
     let centre = |cell: u32| {
         let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
@@ -317,21 +412,48 @@ fn curves(history: &[RoundStats]) -> LineChart {
 }
 
 fn print_summary(s: &DiscoverySummary, dir: &Path) {
-    println!("world graph discovery: {} maze, seed {}, {} ({})", s.maze, s.seed, s.transport, dir.display());
+    println!(
+        "world graph discovery: {} maze, seed {}, {} ({})",
+        s.maze,
+        s.seed,
+        s.transport,
+        dir.display()
+    );
     println!("  {:<44} {:>12}", "figure", "value");
     let rows: Vec<(&str, String)> = vec![
         ("rounds", s.rounds.to_string()),
         ("pivotal states |V_p|", s.pivotal_states.to_string()),
         ("world graph edges", s.edges.to_string()),
-        ("connected node pairs", format!("{:.1}%", 100.0 * s.connected_pairs)),
-        ("doorway cells in V_p", format!("{:.1}%", 100.0 * s.doorway_fraction_of_pivotal)),
-        ("  chance (doorways among free cells)", format!("{:.1}%", 100.0 * s.doorway_fraction_of_cells)),
-        ("doorways found", format!("{:.1}%", 100.0 * s.doorways_found)),
-        ("reconstruction accuracy", format!("{:.3}", s.reconstruction_accuracy)),
-        ("pi_g success, goals within 10 steps", format!("{:.1}%", 100.0 * s.gcp_success_within_10)),
+        (
+            "connected node pairs",
+            format!("{:.1}%", 100.0 * s.connected_pairs),
+        ),
+        (
+            "doorway cells in V_p",
+            format!("{:.1}%", 100.0 * s.doorway_fraction_of_pivotal),
+        ),
+        (
+            "  chance (doorways among free cells)",
+            format!("{:.1}%", 100.0 * s.doorway_fraction_of_cells),
+        ),
+        (
+            "doorways found",
+            format!("{:.1}%", 100.0 * s.doorways_found),
+        ),
+        (
+            "reconstruction accuracy",
+            format!("{:.3}", s.reconstruction_accuracy),
+        ),
+        (
+            "pi_g success, goals within 10 steps",
+            format!("{:.1}%", 100.0 * s.gcp_success_within_10),
+        ),
         ("env steps", s.env_steps.to_string()),
         ("wall time (s)", format!("{:.1}", s.wall_seconds)),
-        ("training throughput (env-steps/s)", format!("{:.0}", s.train_steps_per_sec)),
+        (
+            "training throughput (env-steps/s)",
+            format!("{:.0}", s.train_steps_per_sec),
+        ),
     ];
     for (k, v) in rows {
         println!("  {k:<44} {v:>12}");

@@ -6,5 +6,5 @@ pub mod bench_planner;
 pub mod demo;
 pub mod discover;
 pub mod run;
-pub mod soak;
 pub mod sim;
+pub mod soak;

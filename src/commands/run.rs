@@ -52,7 +52,10 @@ pub struct RunCmdArgs {
 impl RunCmdArgs {
     /// The run directory.
     pub fn dir(&self) -> PathBuf {
-        self.run.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(&self.run.run))
+        self.run
+            .run_dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("runs").join(&self.run.run))
     }
 
     /// The argument list of `role`'s process.
@@ -83,7 +86,12 @@ impl RunCmdArgs {
                     PolicyKind::Random => "random",
                     PolicyKind::ActorCritic => "actor-critic",
                 };
-                v.extend(["--policy".into(), p.into(), "--route-every".into(), self.route_every.to_string()]);
+                v.extend([
+                    "--policy".into(),
+                    p.into(),
+                    "--route-every".into(),
+                    self.route_every.to_string(),
+                ]);
             }
             Role::Planner => {
                 let g = &self.graph;
@@ -151,24 +159,41 @@ pub fn print_summary(dir: &Path, restarts: &[(Role, u32)], leftovers: &[PathBuf]
     let learner = read_json(dir, "learner.report.json");
     let planner = read_json(dir, "planner.report.json");
     let f = |v: &Option<serde_json::Value>, k: &str| -> String {
-        v.as_ref().and_then(|v| v.pointer(k)).map_or("-".into(), |x| match x.as_f64() {
-            Some(n) if n.fract() != 0.0 => format!("{n:.2}"),
-            _ => x.to_string(),
-        })
+        v.as_ref()
+            .and_then(|v| v.pointer(k))
+            .map_or("-".into(), |x| match x.as_f64() {
+                Some(n) if n.fract() != 0.0 => format!("{n:.2}"),
+                _ => x.to_string(),
+            })
     };
     println!("\nrun summary ({})", dir.display());
     println!("  {:<40} {:>14}", "figure", "value");
     let rows = [
         ("sim: batches", f(&sim, "/batches")),
         ("sim: env-steps/s", f(&sim, "/steps_per_sec")),
-        ("sim: action round trip p50 (us)", f(&sim, "/roundtrip_p50_us")),
-        ("sim: action round trip p99 (us)", f(&sim, "/roundtrip_p99_us")),
+        (
+            "sim: action round trip p50 (us)",
+            f(&sim, "/roundtrip_p50_us"),
+        ),
+        (
+            "sim: action round trip p99 (us)",
+            f(&sim, "/roundtrip_p99_us"),
+        ),
         ("sim: episodes", f(&sim, "/episodes")),
         ("learner: batches answered", f(&learner, "/batches")),
         ("learner: batches lost", f(&learner, "/stream/lost")),
-        ("learner: batches reordered", f(&learner, "/stream/reordered")),
-        ("learner: mean episode return", f(&learner, "/mean_episode_return")),
-        ("planner: graph nodes / edges", format!("{} / {}", f(&planner, "/nodes"), f(&planner, "/edges"))),
+        (
+            "learner: batches reordered",
+            f(&learner, "/stream/reordered"),
+        ),
+        (
+            "learner: mean episode return",
+            f(&learner, "/mean_episode_return"),
+        ),
+        (
+            "planner: graph nodes / edges",
+            format!("{} / {}", f(&planner, "/nodes"), f(&planner, "/edges")),
+        ),
         ("planner: cells visited", f(&planner, "/cells_visited")),
         ("planner: routes answered", f(&planner, "/routes_answered")),
     ];
@@ -178,7 +203,11 @@ pub fn print_summary(dir: &Path, restarts: &[(Role, u32)], leftovers: &[PathBuf]
     for (r, n) in restarts {
         println!("  {:<40} {:>14}", format!("{} restarts", r.name()), n);
     }
-    println!("  {:<40} {:>14}", "shared-memory files left behind", leftovers.len());
+    println!(
+        "  {:<40} {:>14}",
+        "shared-memory files left behind",
+        leftovers.len()
+    );
 }
 
 /// Runs `worldgraph run`.
@@ -187,7 +216,10 @@ pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
     let stop = stop_flag()?;
     let mut p = a.pipeline()?;
     p.start_all()?;
-    let deadline = a.run.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let deadline = a
+        .run
+        .duration
+        .map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut failed = false;
     'watch: loop {
         std::thread::sleep(Duration::from_millis(50));
@@ -196,7 +228,10 @@ pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         for (role, status) in p.poll_exited() {
             if status.code() == Some(EXIT_PEER_DIED as i32) || status.success() {
-                eprintln!("run: the {} process ended ({status}); stopping the run", role.name());
+                eprintln!(
+                    "run: the {} process ended ({status}); stopping the run",
+                    role.name()
+                );
                 break 'watch;
             }
             eprintln!("run: the {} process died ({status})", role.name());
@@ -213,5 +248,9 @@ pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
     let leftovers = teardown(&a.run.run)?;
     let restarts: Vec<(Role, u32)> = Role::ALL.iter().map(|&r| (r, p.restarts(r))).collect();
     print_summary(&a.dir(), &restarts, &leftovers);
-    Ok(if failed { std::process::ExitCode::FAILURE } else { std::process::ExitCode::SUCCESS })
+    Ok(if failed {
+        std::process::ExitCode::FAILURE
+    } else {
+        std::process::ExitCode::SUCCESS
+    })
 }

@@ -104,7 +104,12 @@ fn parse_action(s: &str) -> anyhow::Result<u8> {
         .iter()
         .position(|&name| name.eq_ignore_ascii_case(s))
         .map(|i| i as u8)
-        .with_context(|| format!("unknown action {s:?}: use 0..=6 or one of {:?}", action::NAMES))
+        .with_context(|| {
+            format!(
+                "unknown action {s:?}: use 0..=6 or one of {:?}",
+                action::NAMES
+            )
+        })
 }
 
 fn step_json(t: usize, act: Option<u8>, env: &Env, m: &EnvMeta) -> serde_json::Value {
@@ -136,7 +141,11 @@ fn step_json(t: usize, act: Option<u8>, env: &Env, m: &EnvMeta) -> serde_json::V
 }
 
 fn trace_cmd(a: TraceArgs) -> anyhow::Result<()> {
-    let actions: Vec<u8> = a.actions.iter().map(|s| parse_action(s)).collect::<anyhow::Result<_>>()?;
+    let actions: Vec<u8> = a
+        .actions
+        .iter()
+        .map(|s| parse_action(s))
+        .collect::<anyhow::Result<_>>()?;
     let (layout, mut cfg) = a.world.build()?;
     cfg.auto_reset = AutoReset::Off;
     let cells = layout.width * layout.height;

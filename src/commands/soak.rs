@@ -32,10 +32,10 @@ use serde::Serialize;
 
 use super::run::{RunCmdArgs, stop_flag, teardown};
 use crate::pipeline::Role;
-use crate::roles::{OnPeerDeath, RunArgs};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;
+use crate::roles::{OnPeerDeath, RunArgs};
 use crate::world::WorldArgs;
 
 /// Growth of a process's resident set above which the soak fails (KiB).
@@ -118,7 +118,11 @@ struct ProcMem {
 
 fn last_progress(path: &Path) -> Option<(u32, u64)> {
     let f = std::fs::File::open(path).ok()?;
-    let line = std::io::BufReader::new(f).lines().map_while(Result::ok).filter(|l| !l.is_empty()).last()?;
+    let line = std::io::BufReader::new(f)
+        .lines()
+        .map_while(Result::ok)
+        .filter(|l| !l.is_empty())
+        .last()?;
     let v: serde_json::Value = serde_json::from_str(&line).ok()?;
     Some((v["pid"].as_u64()? as u32, v["seq"].as_u64()?))
 }
@@ -130,11 +134,25 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         anyhow::ensure!(k >= 2.0, "--kill-every must be at least 2 seconds");
     }
     let run = format!("soak-{}", std::process::id());
-    let dir = a.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(&run));
+    let dir = a
+        .run_dir
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(&run));
     let args = RunCmdArgs {
         world: a.world.clone(),
-        graph: GraphArgs { nodes: 32, node_file: None, walks_per_node: 128, walk_len: 64, graph_seed: None },
-        run: RunArgs { run: run.clone(), run_dir: Some(dir.clone()), on_peer_death: OnPeerDeath::Wait, duration: None },
+        graph: GraphArgs {
+            nodes: 32,
+            node_file: None,
+            walks_per_node: 128,
+            walk_len: 64,
+            graph_seed: None,
+        },
+        run: RunArgs {
+            run: run.clone(),
+            run_dir: Some(dir.clone()),
+            on_peer_death: OnPeerDeath::Wait,
+            duration: None,
+        },
         envs: a.envs,
         threads: 1,
         policy: PolicyKind::Random,
@@ -145,8 +163,9 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut p = args.pipeline()?;
     p.start_all()?;
     let start = Instant::now();
-    let start_unix_ms =
-        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64);
+    let start_unix_ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64);
     let end = start + Duration::from_secs_f64(a.minutes * 60.0);
     let mut rng = SmallRng::seed_from_u64(a.world.seed);
     let mut next_kill = a.kill_every.map(|k| start + Duration::from_secs_f64(k));
@@ -164,7 +183,10 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         std::thread::sleep(Duration::from_millis(50));
         let now = Instant::now();
         for (role, status) in p.poll_exited() {
-            bar.println(format!("soak: the {} process exited ({status}); restarting it", role.name()));
+            bar.println(format!(
+                "soak: the {} process exited ({status}); restarting it",
+                role.name()
+            ));
             p.spawn(role)?;
         }
         if now >= next_sample {
@@ -183,7 +205,10 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
                 }
             }
             bar.set_position((now - start).as_secs());
-            bar.set_message(format!("kills {}", recoveries.len() + usize::from(pending.is_some())));
+            bar.set_message(format!(
+                "kills {}",
+                recoveries.len() + usize::from(pending.is_some())
+            ));
         }
         // A pending recovery: batches flow again once the sim's progress
         // moved past what it was right after the restart.
@@ -199,11 +224,15 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
                 let settle = last_progress(&stats);
                 std::thread::sleep(Duration::from_millis(300));
                 if last_progress(&stats) != settle {
-                    recoveries[i].recovered_after_s = Some((Instant::now() - killed_at).as_secs_f64());
+                    recoveries[i].recovered_after_s =
+                        Some((Instant::now() - killed_at).as_secs_f64());
                     pending = None;
                 }
             } else if now - killed_at > RECOVERY_LIMIT {
-                bar.println(format!("soak: no recovery within {RECOVERY_LIMIT:?} after killing the {}", recoveries[i].role.name()));
+                bar.println(format!(
+                    "soak: no recovery within {RECOVERY_LIMIT:?} after killing the {}",
+                    recoveries[i].role.name()
+                ));
                 pending = None;
             }
         }
@@ -215,16 +244,27 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             let before = last_progress(&stats);
             p.kill_hard(role)?;
             let killed_at = Instant::now();
-            bar.println(format!("soak: {:>6.1} s  SIGKILL {}", (killed_at - start).as_secs_f64(), role.name()));
+            bar.println(format!(
+                "soak: {:>6.1} s  SIGKILL {}",
+                (killed_at - start).as_secs_f64(),
+                role.name()
+            ));
             p.spawn(role)?;
-            recoveries.push(Recovery { at_s: (killed_at - start).as_secs_f64(), role, recovered_after_s: None });
+            recoveries.push(Recovery {
+                at_s: (killed_at - start).as_secs_f64(),
+                role,
+                recovered_after_s: None,
+            });
             pending = Some((recoveries.len() - 1, killed_at, before));
             next_kill = a.kill_every.map(|s| killed_at + Duration::from_secs_f64(s));
         }
     }
     bar.finish_and_clear();
     p.stop_all(Duration::from_secs(5));
-    let left: Vec<String> = teardown(&run)?.iter().map(|p| p.display().to_string()).collect();
+    let left: Vec<String> = teardown(&run)?
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
 
     // Lost / reordered: the last line of every learner process.
     let mut per_pid: BTreeMap<u64, serde_json::Value> = BTreeMap::new();
@@ -237,7 +277,12 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             }
         }
     }
-    let sum = |k: &str| per_pid.values().map(|s| s[k].as_u64().unwrap_or(0)).sum::<u64>();
+    let sum = |k: &str| {
+        per_pid
+            .values()
+            .map(|s| s[k].as_u64().unwrap_or(0))
+            .sum::<u64>()
+    };
     let (lost, reordered, sim_restarts_seen) = (sum("lost"), sum("reordered"), sum("sim_restarts"));
 
     let mut batches = 0u64;
@@ -246,11 +291,18 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Ok(f) = std::fs::File::open(&stats) {
         for l in std::io::BufReader::new(f).lines().map_while(Result::ok) {
             if let Ok(v) = serde_json::from_str::<serde_json::Value>(&l) {
-                last_seq.insert(v["pid"].as_u64().unwrap_or(0), v["seq"].as_u64().unwrap_or(0));
-                if let (Some(p99), Some(ms)) = (v["roundtrip_p99_us"].as_f64(), v["unix_ms"].as_u64())
+                last_seq.insert(
+                    v["pid"].as_u64().unwrap_or(0),
+                    v["seq"].as_u64().unwrap_or(0),
+                );
+                if let (Some(p99), Some(ms)) =
+                    (v["roundtrip_p99_us"].as_f64(), v["unix_ms"].as_u64())
                     && p99.is_finite()
                 {
-                    minutes.entry(ms.saturating_sub(start_unix_ms) / 60_000).or_default().push(p99);
+                    minutes
+                        .entry(ms.saturating_sub(start_unix_ms) / 60_000)
+                        .or_default()
+                        .push(p99);
                 }
             }
         }
@@ -274,9 +326,17 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             *g = (*g).max(m.last as i64 - b as i64);
         }
     }
-    let failed_recoveries = recoveries.iter().filter(|r| r.recovered_after_s.is_none()).count();
+    let failed_recoveries = recoveries
+        .iter()
+        .filter(|r| r.recovered_after_s.is_none())
+        .count();
     let leaked = growth.values().any(|&g| g > RSS_GROWTH_LIMIT_KIB);
-    let ok = lost == 0 && reordered == 0 && left.is_empty() && !leaked && failed_recoveries == 0 && batches > 0;
+    let ok = lost == 0
+        && reordered == 0
+        && left.is_empty()
+        && !leaked
+        && failed_recoveries == 0
+        && batches > 0;
     let report = SoakReport {
         minutes: (Instant::now() - start).as_secs_f64() / 60.0,
         batches,
@@ -291,13 +351,20 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         shm_left_behind: left,
         ok,
     };
-    sim::render::write_atomic(&dir.join("soak.report.json"), &serde_json::to_vec_pretty(&report)?)?;
+    sim::render::write_atomic(
+        &dir.join("soak.report.json"),
+        &serde_json::to_vec_pretty(&report)?,
+    )?;
     if a.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         print_report(&report, &dir);
     }
-    Ok(if ok { std::process::ExitCode::SUCCESS } else { std::process::ExitCode::FAILURE })
+    Ok(if ok {
+        std::process::ExitCode::SUCCESS
+    } else {
+        std::process::ExitCode::FAILURE
+    })
 }
 
 fn print_report(r: &SoakReport, dir: &Path) {
@@ -306,22 +373,47 @@ fn print_report(r: &SoakReport, dir: &Path) {
     println!("  {:<34} {:>12}", "batches published", r.batches);
     println!("  {:<34} {:>12}", "batches lost", r.lost);
     println!("  {:<34} {:>12}", "batches reordered", r.reordered);
-    println!("  {:<34} {:>12}", "sim restarts seen by learners", r.sim_restarts_seen);
+    println!(
+        "  {:<34} {:>12}",
+        "sim restarts seen by learners", r.sim_restarts_seen
+    );
     for (role, g) in &r.rss_growth_kib {
         println!("  {:<34} {:>12}", format!("{role} RSS growth (KiB)"), g);
     }
     for (role, m) in &r.rss_max_kib {
         println!("  {:<34} {:>12}", format!("{role} RSS max (KiB)"), m);
     }
-    let fmt = |v: &[f64]| v.iter().map(|x| format!("{x:.0}")).collect::<Vec<_>>().join(" ");
-    println!("  {:<34} {}", "round-trip p99 per minute (us)", fmt(&r.roundtrip_p99_us_per_minute));
-    println!("  {:<34} {}", "  worst 250 ms interval (us)", fmt(&r.roundtrip_p99_us_worst_interval_per_minute));
-    println!("  {:<34} {:>12}", "shared-memory files left behind", r.shm_left_behind.len());
+    let fmt = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.0}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    println!(
+        "  {:<34} {}",
+        "round-trip p99 per minute (us)",
+        fmt(&r.roundtrip_p99_us_per_minute)
+    );
+    println!(
+        "  {:<34} {}",
+        "  worst 250 ms interval (us)",
+        fmt(&r.roundtrip_p99_us_worst_interval_per_minute)
+    );
+    println!(
+        "  {:<34} {:>12}",
+        "shared-memory files left behind",
+        r.shm_left_behind.len()
+    );
     if !r.recoveries.is_empty() {
         println!("  kills:");
         for k in &r.recoveries {
             match k.recovered_after_s {
-                Some(s) => println!("    {:>7.1} s  {:<8} recovered after {:.2} s", k.at_s, k.role.name(), s),
+                Some(s) => println!(
+                    "    {:>7.1} s  {:<8} recovered after {:.2} s",
+                    k.at_s,
+                    k.role.name(),
+                    s
+                ),
                 None => println!("    {:>7.1} s  {:<8} NOT recovered", k.at_s, k.role.name()),
             }
         }

@@ -20,7 +20,9 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 use shm_schemas::ObsShape;
 
-use super::{EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE};
+use super::{
+    EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE,
+};
 use crate::latency::Latencies;
 use crate::world::WorldArgs;
 
@@ -85,8 +87,17 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         connect_timeout: Duration::from_secs(3600),
         ..ShmEnvOptions::default()
     };
-    eprintln!("learner: run '{}', waiting for observation batches of {} x {}x{}", ctx.run, a.envs, shape.width, shape.height);
-    let mut env = match ShmEnv::<ipc::Service>::connect(&ctx.config, ctx.run.clone(), shape, num_actions, opts) {
+    eprintln!(
+        "learner: run '{}', waiting for observation batches of {} x {}x{}",
+        ctx.run, a.envs, shape.width, shape.height
+    );
+    let mut env = match ShmEnv::<ipc::Service>::connect(
+        &ctx.config,
+        ctx.run.clone(),
+        shape,
+        num_actions,
+        opts,
+    ) {
         Ok(env) => env,
         Err(EnvError::Interrupted) => return Ok(std::process::ExitCode::SUCCESS),
         Err(e) => return Err(e.into()),
@@ -94,15 +105,26 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut policy: Box<dyn Policy> = match a.policy {
         PolicyKind::Random => Box::new(RandomPolicy::new(num_actions, a.world.seed ^ 0x5eed)),
         PolicyKind::ActorCritic => Box::new(ActorCriticPolicy::new(
-            &ActorCriticConfig { num_actions: num_actions as i64, ..ActorCriticConfig::default() },
+            &ActorCriticConfig {
+                num_actions: num_actions as i64,
+                ..ActorCriticConfig::default()
+            },
             a.envs,
             layout.width,
             layout.height,
             a.world.seed,
         )),
     };
-    let route_client = if a.route_every > 0 { Some(env.node().route_client()?) } else { None };
-    let graph = if a.route_every > 0 { Some(env.node().graph_subscriber(layout.width, layout.height)?) } else { None };
+    let route_client = if a.route_every > 0 {
+        Some(env.node().route_client()?)
+    } else {
+        None
+    };
+    let graph = if a.route_every > 0 {
+        Some(env.node().graph_subscriber(layout.width, layout.height)?)
+    } else {
+        None
+    };
     let mut num_pivots = 0usize;
     let mut rng = SmallRng::seed_from_u64(a.world.seed);
 
@@ -112,8 +134,10 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     }
     // Appended by every learner process of the run, one line per second
     // with its pid: what a soak test sums up even for a killed learner.
-    let mut stream_log =
-        std::fs::OpenOptions::new().create(true).append(true).open(ctx.dir.join("learner.stream.jsonl"))?;
+    let mut stream_log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(ctx.dir.join("learner.stream.jsonl"))?;
     let pid = std::process::id();
     let stream_line = |s: StreamStats| serde_json::json!({ "pid": pid, "stream": s }).to_string();
     let mut planner = PeerWatch::new(PLANNER_NODE);
@@ -173,9 +197,13 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 let to = rng.random_range(0..num_pivots) as u16;
                 let t0 = Instant::now();
                 routes_requested += 1;
-                if let Ok(reply) = client.request(0, cell, dir, to)?.wait(Duration::from_millis(50)) {
+                if let Ok(reply) = client
+                    .request(0, cell, dir, to)?
+                    .wait(Duration::from_millis(50))
+                {
                     lat.record("route_client", t0.elapsed().as_nanos() as u64);
-                    routes_ok += u64::from(reply.response().status() == Some(shm_schemas::RouteStatus::Ok));
+                    routes_ok +=
+                        u64::from(reply.response().status() == Some(shm_schemas::RouteStatus::Ok));
                 }
             }
         }
@@ -194,7 +222,11 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         stream,
         batches,
         episodes,
-        mean_episode_return: if episodes > 0 { return_sum / episodes as f64 } else { f64::NAN },
+        mean_episode_return: if episodes > 0 {
+            return_sum / episodes as f64
+        } else {
+            f64::NAN
+        },
         routes_ok,
         routes_requested,
         stopped_by: stopped_by.clone(),
@@ -204,7 +236,15 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     eprint!("{}", lat.table());
     eprintln!(
         "learner: {} batches, lost {}, reordered {}, sim restarts {}, stopped by {}",
-        batches, report.stream.lost, report.stream.reordered, report.stream.sim_restarts, stopped_by
+        batches,
+        report.stream.lost,
+        report.stream.reordered,
+        report.stream.sim_restarts,
+        stopped_by
     );
-    Ok(if stopped_by == "sim died" { std::process::ExitCode::from(EXIT_PEER_DIED) } else { std::process::ExitCode::SUCCESS })
+    Ok(if stopped_by == "sim died" {
+        std::process::ExitCode::from(EXIT_PEER_DIED)
+    } else {
+        std::process::ExitCode::SUCCESS
+    })
 }

@@ -94,11 +94,16 @@ impl RunCtx {
     pub fn new(a: &RunArgs) -> anyhow::Result<RunCtx> {
         let run = RunName::new(&a.run)?;
         let config = run_config(&run)?;
-        let dir = a.run_dir.clone().unwrap_or_else(|| PathBuf::from("runs").join(run.as_str()));
-        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create run directory {}", dir.display()))?;
+        let dir = a
+            .run_dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("runs").join(run.as_str()));
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create run directory {}", dir.display()))?;
         let stop = Arc::new(AtomicBool::new(false));
         for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-            signal_hook::flag::register(sig, Arc::clone(&stop)).context("cannot install signal handlers")?;
+            signal_hook::flag::register(sig, Arc::clone(&stop))
+                .context("cannot install signal handlers")?;
         }
         let report = Arc::new(AtomicBool::new(false));
         signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&report))
@@ -106,8 +111,18 @@ impl RunCtx {
         if let Some(d) = a.duration {
             anyhow::ensure!(d > 0.0, "--duration must be positive");
         }
-        let deadline = a.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
-        Ok(RunCtx { run, config, dir, on_peer_death: a.on_peer_death, stop, report, deadline })
+        let deadline = a
+            .duration
+            .map(|d| Instant::now() + Duration::from_secs_f64(d));
+        Ok(RunCtx {
+            run,
+            config,
+            dir,
+            on_peer_death: a.on_peer_death,
+            stop,
+            report,
+            deadline,
+        })
     }
 
     /// True once a stop was requested or the duration is over.
@@ -182,7 +197,13 @@ pub enum PeerEvent {
 impl PeerWatch {
     /// Watches node `name`.
     pub fn new(name: &'static str) -> PeerWatch {
-        PeerWatch { name, next_check: Instant::now(), missing_since: None, gone: false, deaths: 0 }
+        PeerWatch {
+            name,
+            next_check: Instant::now(),
+            missing_since: None,
+            gone: false,
+            deaths: 0,
+        }
     }
 
     /// Checks the registry at most every [`PEER_CHECK_EVERY`].
@@ -213,5 +234,10 @@ impl PeerWatch {
 /// Resident set size of process `pid` in KiB (Linux `/proc`), if readable.
 pub fn rss_kib(pid: u32) -> Option<u64> {
     let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    s.lines().find(|l| l.starts_with("VmRSS:"))?.split_whitespace().nth(1)?.parse().ok()
+    s.lines()
+        .find(|l| l.starts_with("VmRSS:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
 }

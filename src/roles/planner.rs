@@ -26,7 +26,9 @@ use shm_schemas::service::PipelineNode;
 use shm_schemas::{GraphEdge, ObsShape, RouteStatus, SeqEvent, SeqTracker};
 use sim::{Layout, Pose};
 
-use super::{EXIT_PEER_DIED, OnPeerDeath, PLANNER_NODE, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE};
+use super::{
+    EXIT_PEER_DIED, OnPeerDeath, PLANNER_NODE, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE,
+};
 use crate::latency::Latencies;
 use crate::world::WorldArgs;
 
@@ -56,7 +58,9 @@ impl GraphArgs {
     pub fn config(&self, world: &WorldArgs) -> PlannerConfig {
         PlannerConfig {
             candidates: match &self.node_file {
-                Some(p) => CandidateSet::File { path: p.display().to_string() },
+                Some(p) => CandidateSet::File {
+                    path: p.display().to_string(),
+                },
                 None => CandidateSet::Random { k: self.nodes },
             },
             seed: self.graph_seed.unwrap_or(world.seed),
@@ -109,12 +113,19 @@ pub struct PlannerReport {
 }
 
 /// Loads the run's saved graph when it fits `layout`, or builds and saves one.
-pub fn load_or_build(dir: &std::path::Path, layout: &Layout, cfg: &PlannerConfig) -> anyhow::Result<(WorldGraph, bool)> {
+pub fn load_or_build(
+    dir: &std::path::Path,
+    layout: &Layout,
+    cfg: &PlannerConfig,
+) -> anyhow::Result<(WorldGraph, bool)> {
     let path = dir.join("graph.json");
     if path.exists() {
         match WorldGraph::load(&path) {
             Ok(g) if g.layout() == layout && g.config() == cfg => return Ok((g, true)),
-            Ok(_) => tracing::info!("planner: {} is for another maze or configuration; rebuilding", path.display()),
+            Ok(_) => tracing::info!(
+                "planner: {} is for another maze or configuration; rebuilding",
+                path.display()
+            ),
             Err(e) => tracing::warn!("planner: cannot load {}: {e}; rebuilding", path.display()),
         }
     }
@@ -149,13 +160,24 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     cfg.validate()?;
     let (graph, graph_loaded) = load_or_build(&ctx.dir, &layout, &cfg)?;
     let nodes: Vec<u32> = graph.nodes().iter().map(|c| c.0).collect();
-    let edges: Vec<GraphEdge> =
-        graph.edges().iter().map(|e| GraphEdge { from: e.from.0, to: e.to.0, weight: e.weight() }).collect();
+    let edges: Vec<GraphEdge> = graph
+        .edges()
+        .iter()
+        .map(|e| GraphEdge {
+            from: e.from.0,
+            to: e.to.0,
+            weight: e.weight(),
+        })
+        .collect();
 
     let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), PLANNER_NODE)?;
     node.cleanup_dead_nodes();
-    let obs = node.obs_subscriber(shape).context("planner: cannot open the observation service")?;
-    let server = node.route_server().context("planner: cannot open the route service")?;
+    let obs = node
+        .obs_subscriber(shape)
+        .context("planner: cannot open the observation service")?;
+    let server = node
+        .route_server()
+        .context("planner: cannot open the route service")?;
     let snapshots = node.graph_publisher(layout.width, layout.height)?;
     let graph_version = 1u64;
     snapshots.publish(graph_version, &nodes, &edges)?;
@@ -207,7 +229,13 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                     pivots.extend(route.nodes().iter().map(|n| n.0));
                     cells.clear();
                     cells.extend(route.cells().iter().map(|c| c.0));
-                    call.respond(graph_version, RouteStatus::Ok, &pivots, &cells, route.actions())?
+                    call.respond(
+                        graph_version,
+                        RouteStatus::Ok,
+                        &pivots,
+                        &cells,
+                        route.actions(),
+                    )?
                 }
                 Err(e) => call.respond(graph_version, status_of(&e), &[], &[], &[])?,
             };
@@ -273,5 +301,9 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         "planner: read {} batches (skipped {}), {} cells visited, {} routes answered, stopped by {}",
         batches, skipped, report.cells_visited, answered, stopped_by
     );
-    Ok(if stopped_by == "sim died" { std::process::ExitCode::from(EXIT_PEER_DIED) } else { std::process::ExitCode::SUCCESS })
+    Ok(if stopped_by == "sim died" {
+        std::process::ExitCode::from(EXIT_PEER_DIED)
+    } else {
+        std::process::ExitCode::SUCCESS
+    })
 }

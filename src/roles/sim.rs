@@ -13,11 +13,13 @@ use anyhow::Context;
 use clap::Args;
 use iceoryx2::prelude::ipc;
 use serde::Serialize;
-use shm_schemas::{Backoff, ObsShape};
 use shm_schemas::service::PipelineNode;
+use shm_schemas::{Backoff, ObsShape};
 use sim::{BatchEnv, StepOut};
 
-use super::{EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE};
+use super::{
+    EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE,
+};
 use crate::latency::Latencies;
 use crate::world::WorldArgs;
 
@@ -103,10 +105,17 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), SIM_NODE)?;
     let cleaned = node.cleanup_dead_nodes();
     if cleaned.cleanups > 0 {
-        tracing::info!("sim: removed stale resources of {} dead node(s) of a previous run", cleaned.cleanups);
+        tracing::info!(
+            "sim: removed stale resources of {} dead node(s) of a previous run",
+            cleaned.cleanups
+        );
     }
-    let publisher = node.obs_publisher(shape).context("sim: cannot open the observation service")?;
-    let actions = node.act_subscriber(a.envs).context("sim: cannot open the action service")?;
+    let publisher = node
+        .obs_publisher(shape)
+        .context("sim: cannot open the observation service")?;
+    let actions = node
+        .act_subscriber(a.envs)
+        .context("sim: cannot open the action service")?;
     tracing::info!(
         "sim: run '{}', {} x {}x{} {} on '{}', publishing",
         ctx.run,
@@ -123,7 +132,10 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut interval = Latencies::new("sim");
     interval.register("action_round_trip");
     let mut minute = interval.clone();
-    let mut stats = std::fs::OpenOptions::new().create(true).append(true).open(ctx.dir.join("sim.stats.jsonl"))?;
+    let mut stats = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(ctx.dir.join("sim.stats.jsonl"))?;
     let pid = std::process::id();
     let mut learner = PeerWatch::new(LEARNER_NODE);
 
@@ -167,7 +179,10 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             ctx.report_on_request(&lat);
             match learner.poll(&ctx) {
                 PeerEvent::Died => {
-                    eprintln!("sim: the learner is gone (no live '{LEARNER_NODE}' node for {:?})", super::PEER_TIMEOUT);
+                    eprintln!(
+                        "sim: the learner is gone (no live '{LEARNER_NODE}' node for {:?})",
+                        super::PEER_TIMEOUT
+                    );
                     node.cleanup_dead_nodes();
                     if ctx.on_peer_death == OnPeerDeath::Exit {
                         stopped_by = "learner died".into();
@@ -222,7 +237,8 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             };
             if sent_at >= next_minute {
                 line.minute = Some(minutes);
-                line.minute_roundtrip_p99_us = Some(minute.percentile_us("action_round_trip", 99.0));
+                line.minute_roundtrip_p99_us =
+                    Some(minute.percentile_us("action_round_trip", 99.0));
                 minute.reset();
                 minutes += 1;
                 next_minute += Duration::from_secs(60);

@@ -26,7 +26,11 @@ pub struct AgentPose {
 impl AgentPose {
     /// A pose facing right and carrying nothing.
     pub fn at(cell: u32) -> Self {
-        Self { cell, direction: 0, carried: 0 }
+        Self {
+            cell,
+            direction: 0,
+            carried: 0,
+        }
     }
 }
 
@@ -80,14 +84,23 @@ impl TrajectoryBatch {
             check_trajectory(index, tau, cfg)?;
         }
         let batch = trajectories.len();
-        let max_len = trajectories.iter().map(|tau| tau.states.len()).max().unwrap_or(0);
+        let max_len = trajectories
+            .iter()
+            .map(|tau| tau.states.len())
+            .max()
+            .unwrap_or(0);
         let cells_of = |len: usize| vec![0_i64; len * batch];
-        let (mut cells, mut directions, mut carried, mut actions) =
-            (cells_of(max_len), cells_of(max_len), cells_of(max_len), cells_of(max_len));
+        let (mut cells, mut directions, mut carried, mut actions) = (
+            cells_of(max_len),
+            cells_of(max_len),
+            cells_of(max_len),
+            cells_of(max_len),
+        );
         let mut state_mask = vec![0_f32; max_len * batch];
         let mut action_mask = vec![0_f32; max_len * batch];
         let mut boundary_mask = vec![0_f32; max_len * batch];
-        let mut reverse_index: Vec<i64> = (0..max_len * batch).map(|i| (i / batch) as i64).collect();
+        let mut reverse_index: Vec<i64> =
+            (0..max_len * batch).map(|i| (i / batch) as i64).collect();
         for (b, tau) in trajectories.iter().enumerate() {
             let len = tau.states.len();
             for (t, pose) in tau.states.iter().enumerate() {
@@ -113,7 +126,10 @@ impl TrajectoryBatch {
             directions: ints(&directions),
             carried: ints(&carried),
             actions: ints(&actions),
-            lengths: trajectories.iter().map(|tau| tau.states.len() as i64).collect(),
+            lengths: trajectories
+                .iter()
+                .map(|tau| tau.states.len() as i64)
+                .collect(),
             state_mask: floats(&state_mask),
             action_mask: floats(&action_mask),
             boundary_mask: floats(&boundary_mask),
@@ -150,13 +166,21 @@ impl TrajectoryBatch {
     }
 }
 
-fn check_trajectory(index: usize, tau: &Trajectory, cfg: &LatentConfig) -> Result<(), LearnerError> {
+fn check_trajectory(
+    index: usize,
+    tau: &Trajectory,
+    cfg: &LatentConfig,
+) -> Result<(), LearnerError> {
     let states = tau.states.len();
     if states < 2 {
         return Err(LearnerError::TrajectoryTooShort { index, states });
     }
     if tau.actions.len() + 1 != states {
-        return Err(LearnerError::ActionCountMismatch { index, states, actions: tau.actions.len() });
+        return Err(LearnerError::ActionCountMismatch {
+            index,
+            states,
+            actions: tau.actions.len(),
+        });
     }
     let out_of_range = |what, value: i64, limit: i64| {
         (value >= limit).then_some(LearnerError::OutOfRange { what, value, limit })
@@ -185,20 +209,33 @@ mod tests {
     use tch::Kind;
 
     fn walk(cells: &[u32], actions: &[u8]) -> Trajectory {
-        Trajectory { states: cells.iter().map(|&c| AgentPose::at(c)).collect(), actions: actions.to_vec() }
+        Trajectory {
+            states: cells.iter().map(|&c| AgentPose::at(c)).collect(),
+            actions: actions.to_vec(),
+        }
     }
 
     fn cfg() -> LatentConfig {
-        LatentConfig { num_cells: 10, num_actions: 4, ..Default::default() }
+        LatentConfig {
+            num_cells: 10,
+            num_actions: 4,
+            ..Default::default()
+        }
     }
 
     #[test]
     fn pads_time_major_with_masks_and_boundaries() {
-        let batch = TrajectoryBatch::new(&[walk(&[1, 2, 3, 4], &[0, 0, 1]), walk(&[7, 8], &[2])], &cfg(), Device::Cpu)
-            .expect("valid batch");
+        let batch = TrajectoryBatch::new(
+            &[walk(&[1, 2, 3, 4], &[0, 0, 1]), walk(&[7, 8], &[2])],
+            &cfg(),
+            Device::Cpu,
+        )
+        .expect("valid batch");
         assert_eq!((batch.max_len(), batch.batch_size()), (4, 2));
         assert_eq!(batch.lengths, vec![4, 2]);
-        let column = |t: &Tensor, b: i64| Vec::<f64>::try_from(t.select(1, b).to_kind(Kind::Double)).expect("1-d");
+        let column = |t: &Tensor, b: i64| {
+            Vec::<f64>::try_from(t.select(1, b).to_kind(Kind::Double)).expect("1-d")
+        };
         assert_eq!(column(&batch.cells, 1), vec![7.0, 8.0, 0.0, 0.0]);
         assert_eq!(column(&batch.state_mask, 1), vec![1.0, 1.0, 0.0, 0.0]);
         assert_eq!(column(&batch.action_mask, 0), vec![1.0, 1.0, 1.0, 0.0]);
@@ -206,7 +243,9 @@ mod tests {
         assert_eq!(column(&batch.boundary_mask, 0), vec![1.0, 0.0, 0.0, 1.0]);
         assert_eq!(column(&batch.interior_mask(), 0), vec![0.0, 1.0, 1.0, 0.0]);
         assert_eq!(column(&batch.interior_mask(), 1), vec![0.0, 0.0, 0.0, 0.0]);
-        let reversed = batch.reverse_in_time(&batch.cells.unsqueeze(-1)).squeeze_dim(-1);
+        let reversed = batch
+            .reverse_in_time(&batch.cells.unsqueeze(-1))
+            .squeeze_dim(-1);
         assert_eq!(column(&reversed, 0), vec![4.0, 3.0, 2.0, 1.0]);
         assert_eq!(column(&reversed, 1), vec![8.0, 7.0, 0.0, 0.0]);
     }
@@ -227,8 +266,22 @@ mod tests {
                 "empty" => matches!(err, LearnerError::EmptyBatch),
                 "short" => matches!(err, LearnerError::TrajectoryTooShort { states: 1, .. }),
                 "mismatch" => matches!(err, LearnerError::ActionCountMismatch { actions: 0, .. }),
-                "cell" => matches!(err, LearnerError::OutOfRange { what: "cell", value: 12, .. }),
-                _ => matches!(err, LearnerError::OutOfRange { what: "action", value: 4, .. }),
+                "cell" => matches!(
+                    err,
+                    LearnerError::OutOfRange {
+                        what: "cell",
+                        value: 12,
+                        ..
+                    }
+                ),
+                _ => matches!(
+                    err,
+                    LearnerError::OutOfRange {
+                        what: "action",
+                        value: 4,
+                        ..
+                    }
+                ),
             };
             assert!(matches, "{case}: {err}");
         }

@@ -112,7 +112,10 @@ mod tests {
         for (a, alpha, beta, expected) in table {
             let got = kl(a, alpha, beta);
             eprintln!("KL({a}; {alpha}, {beta}): closed {got:.6}, table {expected}");
-            assert!((got - expected).abs() < 1e-5, "KL({a}; {alpha}, {beta}) = {got}, table {expected}");
+            assert!(
+                (got - expected).abs() < 1e-5,
+                "KL({a}; {alpha}, {beta}) = {got}, table {expected}"
+            );
         }
     }
 
@@ -146,10 +149,17 @@ mod tests {
         prior.kl_from_kuma(&a).sum(None).backward();
         for (name, raw) in [("ã", &raw_a), ("α", &raw_alpha), ("β", &raw_beta)] {
             let grad = raw.grad();
-            let finite = grad.isfinite().all().to_kind(Kind::Double).double_value(&[]);
+            let finite = grad
+                .isfinite()
+                .all()
+                .to_kind(Kind::Double)
+                .double_value(&[]);
             assert_eq!(finite, 1.0, "{name}: {grad}");
             let smallest = grad.abs().min().double_value(&[]);
-            assert!(smallest > 0.0, "{name}: every element needs a gradient, {grad}");
+            assert!(
+                smallest > 0.0,
+                "{name}: every element needs a gradient, {grad}"
+            );
         }
     }
 
@@ -169,13 +179,21 @@ mod tests {
         let prior = BetaPrior::from_raw(&raw, &raw);
         let a = positive_parameter(&raw);
         prior.kl_from_kuma(&a).sum(None).backward();
-        let finite = raw.grad().isfinite().all().to_kind(Kind::Double).double_value(&[]);
+        let finite = raw
+            .grad()
+            .isfinite()
+            .all()
+            .to_kind(Kind::Double)
+            .double_value(&[]);
         assert_eq!(finite, 1.0);
     }
 
     #[test]
     fn prior_mean_is_alpha_over_alpha_plus_beta() {
-        let prior = BetaPrior::new(Tensor::from_slice(&[1.0_f64, 3.0]), Tensor::from_slice(&[3.0_f64, 1.0]));
+        let prior = BetaPrior::new(
+            Tensor::from_slice(&[1.0_f64, 3.0]),
+            Tensor::from_slice(&[3.0_f64, 1.0]),
+        );
         let mean = prior.mean();
         assert!((mean.double_value(&[0]) - 0.25).abs() < 1e-15);
         assert!((mean.double_value(&[1]) - 0.75).abs() < 1e-15);

@@ -118,7 +118,10 @@ impl LatentConfig {
         ];
         for (field, value) in non_negative {
             if !(value.is_finite() && value >= 0.0) {
-                return Err(ConfigError::new(field, format!("must be finite and ≥ 0, got {value}")));
+                return Err(ConfigError::new(
+                    field,
+                    format!("must be finite and ≥ 0, got {value}"),
+                ));
             }
         }
         let positive = [
@@ -128,19 +131,28 @@ impl LatentConfig {
         ];
         for (field, value) in positive {
             if !(value.is_finite() && value > 0.0) {
-                return Err(ConfigError::new(field, format!("must be finite and > 0, got {value}")));
+                return Err(ConfigError::new(
+                    field,
+                    format!("must be finite and > 0, got {value}"),
+                ));
             }
         }
         if !(self.lambda_max.is_finite() && self.lambda_max >= self.lambda_min) {
             return Err(ConfigError::new(
                 "lambda_max",
-                format!("must be finite and ≥ lambda_min = {}, got {}", self.lambda_min, self.lambda_max),
+                format!(
+                    "must be finite and ≥ lambda_min = {}, got {}",
+                    self.lambda_min, self.lambda_max
+                ),
             ));
         }
         if !(self.lambda_min..=self.lambda_max).contains(&self.lambda_init) {
             return Err(ConfigError::new(
                 "lambda_init",
-                format!("must lie in [lambda_min, lambda_max], got {}", self.lambda_init),
+                format!(
+                    "must lie in [lambda_min, lambda_max], got {}",
+                    self.lambda_init
+                ),
             ));
         }
         if !(0.0..1.0).contains(&self.constraint_decay) {
@@ -168,7 +180,8 @@ mod tests {
 
     #[test]
     fn missing_fields_take_defaults_and_unknown_fields_are_rejected() {
-        let cfg: LatentConfig = serde_json::from_str(r#"{"num_cells": 169}"#).expect("partial config");
+        let cfg: LatentConfig =
+            serde_json::from_str(r#"{"num_cells": 169}"#).expect("partial config");
         assert_eq!(cfg.num_cells, 169);
         assert_eq!(cfg.lstm_hidden, LatentConfig::default().lstm_hidden);
         assert!(serde_json::from_str::<LatentConfig>(r#"{"num_cell": 169}"#).is_err());
@@ -177,13 +190,34 @@ mod tests {
     #[test]
     fn validate_names_the_bad_field() {
         let bad = [
-            LatentConfig { num_cells: 0, ..Default::default() },
-            LatentConfig { target_kept: -1.0, ..Default::default() },
-            LatentConfig { lambda_init: 100.0, ..Default::default() },
-            LatentConfig { constraint_decay: 1.0, ..Default::default() },
-            LatentConfig { learning_rate: f64::NAN, ..Default::default() },
+            LatentConfig {
+                num_cells: 0,
+                ..Default::default()
+            },
+            LatentConfig {
+                target_kept: -1.0,
+                ..Default::default()
+            },
+            LatentConfig {
+                lambda_init: 100.0,
+                ..Default::default()
+            },
+            LatentConfig {
+                constraint_decay: 1.0,
+                ..Default::default()
+            },
+            LatentConfig {
+                learning_rate: f64::NAN,
+                ..Default::default()
+            },
         ];
-        let fields = ["num_cells", "target_kept", "lambda_init", "constraint_decay", "learning_rate"];
+        let fields = [
+            "num_cells",
+            "target_kept",
+            "lambda_init",
+            "constraint_decay",
+            "learning_rate",
+        ];
         for (cfg, field) in bad.iter().zip(fields) {
             let err = cfg.validate().expect_err("invalid config");
             assert_eq!(err.field, field);

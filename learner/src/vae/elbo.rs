@@ -55,7 +55,9 @@ pub struct ElboTerms {
 
 /// Sums `x` (`[L, B]`) over time under `mask` and averages over the batch.
 fn per_trajectory_mean(x: &Tensor, mask: &Tensor) -> Tensor {
-    (x * mask).sum_dim_intlist(0_i64, false, None::<Kind>).mean(None::<Kind>)
+    (x * mask)
+        .sum_dim_intlist(0_i64, false, None::<Kind>)
+        .mean(None::<Kind>)
 }
 
 /// The action log-likelihood terms: per-step NLL `−log p_θ(a_t | S, Z)`
@@ -67,7 +69,10 @@ pub fn action_nll(logits: &Tensor, batch: &TrajectoryBatch) -> (Tensor, Tensor) 
     let log_probs = logits.log_softmax(-1, Kind::Float);
     let taken = batch.actions.unsqueeze(-1);
     let nll = -log_probs.gather(-1, &taken, false).squeeze_dim(-1) * &batch.action_mask;
-    let correct = log_probs.argmax(-1, false).eq_tensor(&batch.actions).to_kind(Kind::Float)
+    let correct = log_probs
+        .argmax(-1, false)
+        .eq_tensor(&batch.actions)
+        .to_kind(Kind::Float)
         * &batch.action_mask;
     (nll, correct)
 }
@@ -101,8 +106,14 @@ pub fn elbo_terms(
     let transition = (changes - 2.0 * target_kept).square().mean(None::<Kind>);
 
     let interior_count = interior.sum(None::<Kind>).double_value(&[]).max(1.0);
-    let action_count = batch.action_mask.sum(None::<Kind>).double_value(&[]).max(1.0);
-    let sampled_kept = (z.gt(0.0).to_kind(Kind::Float) * &interior).sum(None::<Kind>).double_value(&[]);
+    let action_count = batch
+        .action_mask
+        .sum(None::<Kind>)
+        .double_value(&[])
+        .max(1.0);
+    let sampled_kept = (z.gt(0.0).to_kind(Kind::Float) * &interior)
+        .sum(None::<Kind>)
+        .double_value(&[]);
     ElboTerms {
         reconstruction_nll,
         kl,
@@ -134,14 +145,20 @@ pub struct LagrangeMultiplier {
 impl LagrangeMultiplier {
     /// A multiplier at `cfg.lambda_init` for the constraint `L ≤ tolerance`.
     pub fn new(cfg: &LatentConfig, tolerance: f64) -> Self {
-        Self { value: cfg.lambda_init, constraint_average: 0.0, tolerance, seen: false }
+        Self {
+            value: cfg.lambda_init,
+            constraint_average: 0.0,
+            tolerance,
+            seen: false,
+        }
     }
 
     /// One ascent step after observing the regulariser value `term`.
     pub fn ascend(&mut self, term: f64, cfg: &LatentConfig) {
         let constraint = term - self.tolerance;
         self.constraint_average = if self.seen {
-            cfg.constraint_decay * self.constraint_average + (1.0 - cfg.constraint_decay) * constraint
+            cfg.constraint_decay * self.constraint_average
+                + (1.0 - cfg.constraint_decay) * constraint
         } else {
             constraint
         };
@@ -208,7 +225,11 @@ mod tests {
         for _ in 0..50 {
             lambda.ascend(0.0, &cfg);
         }
-        assert!(lambda.value < grown, "λ = {} after the constraint holds", lambda.value);
+        assert!(
+            lambda.value < grown,
+            "λ = {} after the constraint holds",
+            lambda.value
+        );
         for _ in 0..5000 {
             lambda.ascend(0.0, &cfg);
         }

@@ -13,7 +13,10 @@
 //! All functions are element-wise on tensors of any shape and any floating
 //! kind (float64 in the unit tests, float32 in training).
 
+use rand::rngs::SmallRng;
 use tch::Tensor;
+
+use crate::seeding::uniform_like;
 
 /// Lower end `l` of the stretched support (Bastings et al. 2019).
 pub const STRETCH_LOW: f64 = -0.1;
@@ -63,10 +66,10 @@ impl HardKuma {
         Self::new(positive_parameter(raw))
     }
 
-    /// Reparameterised sample with fresh noise `u ~ U(ε, 1 − ε)`; see
-    /// [`HardKuma::sample_with_noise`].
-    pub fn rsample(&self) -> Tensor {
-        let u = self.a.rand_like() * (1.0 - 2.0 * UNIFORM_EPS) + UNIFORM_EPS;
+    /// Reparameterised sample with fresh noise `u ~ U(ε, 1 − ε)` drawn from
+    /// `rng` (see [`crate::seeding`]); see [`HardKuma::sample_with_noise`].
+    pub fn rsample(&self, rng: &mut SmallRng) -> Tensor {
+        let u = uniform_like(rng, &self.a, UNIFORM_EPS, 1.0 - UNIFORM_EPS);
         self.sample_with_noise(&u)
     }
 
@@ -138,7 +141,9 @@ pub fn expected_nonzero(prob_zero: &Tensor, mask: &Tensor) -> Tensor {
 pub fn expected_transitions(prob_zero: &Tensor, mask: &Tensor) -> Tensor {
     let len = prob_zero.size()[0];
     if len < 2 {
-        return prob_zero.zeros_like().sum_dim_intlist(0_i64, false, None::<tch::Kind>);
+        return prob_zero
+            .zeros_like()
+            .sum_dim_intlist(0_i64, false, None::<tch::Kind>);
     }
     let now = prob_zero.narrow(0, 0, len - 1);
     let next = prob_zero.narrow(0, 1, len - 1);
@@ -166,10 +171,13 @@ mod tests {
 
     #[test]
     fn point_masses_match_the_checked_values_and_monte_carlo() {
-        tch::manual_seed(11);
+        let mut rng = rand::SeedableRng::seed_from_u64(11);
         let kuma = HardKuma::new(Tensor::from_slice(&[0.5_f64]));
         // The notes' check: a = 0.5 gives P0 = 0.2887, P1 = 0.0426.
-        let (p0, p1) = (scalar(&kuma.prob_zero().get(0)), scalar(&kuma.prob_one().get(0)));
+        let (p0, p1) = (
+            scalar(&kuma.prob_zero().get(0)),
+            scalar(&kuma.prob_one().get(0)),
+        );
         assert!((p0 - 0.2887).abs() < 5e-5, "P0 = {p0}");
         assert!((p1 - 0.0426).abs() < 5e-5, "P1 = {p1}");
 
@@ -177,7 +185,7 @@ mod tests {
         let n = 1_000_000;
         for a in [0.2_f64, 0.5, 1.0, 3.0] {
             let kuma = HardKuma::new(Tensor::full([n], a, F64));
-            let z = kuma.rsample();
+            let z = kuma.rsample(&mut rng);
             let mc0 = scalar(&z.eq(0.0).to_kind(Kind::Double).mean(None));
             let mc1 = scalar(&z.eq(1.0).to_kind(Kind::Double).mean(None));
             let p0 = t0().powf(a);
@@ -190,22 +198,25 @@ mod tests {
 
     #[test]
     fn samples_lie_in_the_unit_interval_with_exact_zeros_and_ones() {
-        tch::manual_seed(3);
+        let mut rng = rand::SeedableRng::seed_from_u64(3);
         let kuma = HardKuma::new(Tensor::full([20_000], 0.8, F64));
-        let z = kuma.rsample();
+        let z = kuma.rsample(&mut rng);
         assert!(scalar(&z.min()) == 0.0, "exact zeros expected");
         assert!(scalar(&z.max()) == 1.0, "exact ones expected");
         let between = z.gt(0.0).logical_and(&z.lt(1.0));
         let frac_between = scalar(&between.to_kind(Kind::Double).mean(None));
-        assert!(frac_between > 0.3, "continuous part present: {frac_between}");
+        assert!(
+            frac_between > 0.3,
+            "continuous part present: {frac_between}"
+        );
     }
 
     #[test]
     fn gradient_reaches_the_shape_parameter_through_samples_and_masses() {
-        tch::manual_seed(5);
+        let mut rng = rand::SeedableRng::seed_from_u64(5);
         let raw = Tensor::full([1000], 0.3, F64).set_requires_grad(true);
         let kuma = HardKuma::from_raw(&raw);
-        let loss = kuma.rsample().sum(None) + kuma.prob_zero().sum(None);
+        let loss = kuma.rsample(&mut rng).sum(None) + kuma.prob_zero().sum(None);
         loss.backward();
         let grad = raw.grad();
         assert!(scalar(&grad.isfinite().all().to_kind(Kind::Double)) == 1.0);
@@ -214,16 +225,19 @@ mod tests {
 
     #[test]
     fn clamp_limits_give_finite_values_and_gradients() {
-        tch::manual_seed(9);
+        let mut rng = rand::SeedableRng::seed_from_u64(9);
         let raw = Tensor::from_slice(&[-1e4_f64, -50.0, 0.0, 50.0, 1e4]).set_requires_grad(true);
         let kuma = HardKuma::from_raw(&raw);
         let a = &kuma.a;
         assert!(scalar(&a.min()) >= PARAM_MIN && scalar(&a.max()) <= PARAM_MAX);
-        let z = kuma.rsample();
+        let z = kuma.rsample(&mut rng);
         let total = z.sum(None) + kuma.prob_zero().sum(None) + kuma.prob_one().sum(None);
         total.backward();
         for t in [&z, &kuma.prob_zero(), &kuma.prob_one(), &raw.grad()] {
-            assert!(scalar(&t.isfinite().all().to_kind(Kind::Double)) == 1.0, "{t}");
+            assert!(
+                scalar(&t.isfinite().all().to_kind(Kind::Double)) == 1.0,
+                "{t}"
+            );
         }
         // Tiny a: x = u^{1/a} underflows to 0, so z = 0 almost surely.
         assert!(scalar(&z.get(0)) == 0.0);
@@ -242,7 +256,7 @@ mod tests {
 
     #[test]
     fn expectations_match_monte_carlo_and_respect_the_mask() {
-        tch::manual_seed(21);
+        let mut rng = rand::SeedableRng::seed_from_u64(21);
         // [T = 4, B = 2]; the second trajectory has 3 states (last is padding).
         let a = Tensor::from_slice(&[0.3_f64, 2.0, 1.0, 0.5, 4.0, 0.1, 0.7, 9.0]).view([4, 2]);
         let mask = Tensor::from_slice(&[1.0_f64, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0]).view([4, 2]);
@@ -252,12 +266,18 @@ mod tests {
         let changes = expected_transitions(&p0, &mask);
 
         let n = 200_000;
-        let z = HardKuma::new(a.unsqueeze(0).expand([n, 4, 2], false).contiguous()).rsample();
+        let z =
+            HardKuma::new(a.unsqueeze(0).expand([n, 4, 2], false).contiguous()).rsample(&mut rng);
         let nonzero = z.ne(0.0).to_kind(Kind::Double) * mask.unsqueeze(0);
-        let mc_kept = nonzero.sum_dim_intlist(1_i64, false, None::<Kind>).mean_dim(0_i64, false, None::<Kind>);
+        let mc_kept = nonzero
+            .sum_dim_intlist(1_i64, false, None::<Kind>)
+            .mean_dim(0_i64, false, None::<Kind>);
         let flips = (nonzero.narrow(1, 0, 3) - nonzero.narrow(1, 1, 3)).abs()
             * (mask.narrow(0, 0, 3) * mask.narrow(0, 1, 3)).unsqueeze(0);
-        let mc_changes = flips.sum_dim_intlist(1_i64, false, None::<Kind>).mean_dim(0_i64, false, None::<Kind>);
+        let mc_changes =
+            flips
+                .sum_dim_intlist(1_i64, false, None::<Kind>)
+                .mean_dim(0_i64, false, None::<Kind>);
         for b in 0..2 {
             let (e, m) = (scalar(&kept.get(b)), scalar(&mc_kept.get(b)));
             assert!((e - m).abs() < 0.02, "kept b={b}: {e} vs MC {m}");

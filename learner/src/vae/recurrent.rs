@@ -14,8 +14,8 @@
 //! `dnnl_memory_destroy`, libtorch 2.13) on our `[L ≈ 20, B = 32, 40]`
 //! training inputs. At these sizes the loop costs little.
 
-use tch::nn;
 use tch::Tensor;
+use tch::nn;
 
 use super::batch::TrajectoryBatch;
 
@@ -34,7 +34,10 @@ impl LstmLayer {
     /// `in_dim` inputs and `hidden` units; weights under `p`.
     pub fn new(p: &nn::Path, in_dim: i64, hidden: i64) -> Self {
         let bound = 1.0 / (hidden as f64).sqrt();
-        let init = nn::Init::Uniform { lo: -bound, up: bound };
+        let init = nn::Init::Uniform {
+            lo: -bound,
+            up: bound,
+        };
         Self {
             weight_ih: p.var("weight_ih", &[4 * hidden, in_dim], init),
             weight_hh: p.var("weight_hh", &[4 * hidden, hidden], init),

@@ -6,8 +6,8 @@
 //! nothing the cell index does not already identify). Each part gets a
 //! learned embedding; the features are `relu(W·(e_cell + e_dir + e_carried) + b)`.
 
-use tch::nn::{self, Module};
 use tch::Tensor;
+use tch::nn::{self, Module};
 
 use super::config::LatentConfig;
 
@@ -36,7 +36,9 @@ impl StateEncoder {
     /// `cells`, `directions`, `carried`: int64 tensors of one shape `[...]`;
     /// returns `[..., state_dim]`.
     pub fn forward(&self, cells: &Tensor, directions: &Tensor, carried: &Tensor) -> Tensor {
-        let summed = self.cell.forward(cells) + self.direction.forward(directions) + self.carried.forward(carried);
+        let summed = self.cell.forward(cells)
+            + self.direction.forward(directions)
+            + self.carried.forward(carried);
         self.project.forward(&summed).relu()
     }
 }
