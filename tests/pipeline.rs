@@ -200,7 +200,16 @@ fn a_learner_with_another_grid_shape_is_refused_with_a_message_naming_it() {
             .join("sim.log")
             .metadata()
             .is_ok_and(|m| m.len() > 0)));
-    for (maze, envs, needle) in [("medium", "16", "25x19"), ("small", "32", "32")] {
+    for (maze, envs, slices, needle) in [
+        ("medium", "16", "2", "25x19"),
+        ("small", "32", "2", "32"),
+        (
+            "small",
+            "16",
+            "1",
+            "batch in 1 slice(s) expected, publisher sends 2",
+        ),
+    ] {
         let out = Command::new(exe())
             .args([
                 "learner",
@@ -213,6 +222,8 @@ fn a_learner_with_another_grid_shape_is_refused_with_a_message_naming_it() {
                 maze,
                 "--envs",
                 envs,
+                "--slices",
+                slices,
             ])
             .stdin(Stdio::null())
             .output()
@@ -220,7 +231,7 @@ fn a_learner_with_another_grid_shape_is_refused_with_a_message_naming_it() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(
             !out.status.success(),
-            "a {maze}/{envs} learner was accepted: {err}"
+            "a {maze}/{envs}/{slices} learner was accepted: {err}"
         );
         assert!(
             err.contains(needle) && (err.contains("13x13") || err.contains("16")),

@@ -17,7 +17,7 @@ pub const NUM_ACTIONS: u8 = 7;
 /// Header of an action batch (iceoryx2 user header of `wg/<run>/act`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.ActHeader.v1")]
+#[type_name("wg.ActHeader.v2")]
 pub struct ActHeader {
     /// [`SCHEMA_VERSION`] of the writer.
     pub schema_version: u32,

@@ -13,7 +13,9 @@ use std::time::{Duration, Instant};
 /// State of one wait.
 #[derive(Debug, Clone, Copy)]
 pub struct Backoff {
-    start: Instant,
+    /// Read at the first clock check, not at creation: a wait answered
+    /// within the first polls (the common case) never reads the clock.
+    start: Option<Instant>,
     polls: u32,
 }
 
@@ -29,7 +31,7 @@ impl Backoff {
     #[inline]
     pub fn new() -> Backoff {
         Backoff {
-            start: Instant::now(),
+            start: None,
             polls: 0,
         }
     }
@@ -43,7 +45,7 @@ impl Backoff {
             std::hint::spin_loop();
             return;
         }
-        let waited = self.start.elapsed();
+        let waited = self.start.get_or_insert_with(Instant::now).elapsed();
         if waited < Self::SPIN {
             std::hint::spin_loop();
         } else if waited < Self::YIELD {
@@ -53,9 +55,9 @@ impl Backoff {
         }
     }
 
-    /// Time since the wait started.
+    /// Time since the wait's first clock check (after 64 polls).
     pub fn waited(&self) -> Duration {
-        self.start.elapsed()
+        self.start.map_or(Duration::ZERO, |s| s.elapsed())
     }
 }
 

@@ -132,6 +132,29 @@ pub enum SchemaError {
         /// Bytes in the payload.
         got: usize,
     },
+    /// The batch is published in another number of slices.
+    #[error(
+        "{channel}: batch in {expected} slice(s) expected, publisher sends {wire} \
+         (start every process of a run with the same --slices)"
+    )]
+    Slices {
+        /// Which channel.
+        channel: Channel,
+        /// Slices this process expects.
+        expected: u16,
+        /// Slices on the wire.
+        wire: u16,
+    },
+    /// The slices do not divide the batch.
+    #[error("{channel}: {slices} slices do not divide a batch of {total} environments")]
+    SlicesDoNotDivide {
+        /// Which channel.
+        channel: Channel,
+        /// Slices requested.
+        slices: usize,
+        /// Environments in the batch.
+        total: usize,
+    },
     /// A shape or count is outside the fixed capacities of the schema.
     #[error("{channel}: {what} = {value} is out of range (at most {max}, and not 0 for sizes)")]
     OutOfRange {

@@ -30,7 +30,7 @@ pub const MAX_EDGES: usize = 1 << 20;
 /// One directed edge `from → to` of the world graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.GraphEdge.v1")]
+#[type_name("wg.GraphEdge.v2")]
 pub struct GraphEdge {
     /// Source node id.
     pub from: u16,
@@ -43,7 +43,7 @@ pub struct GraphEdge {
 /// Header of a graph snapshot (iceoryx2 user header of `wg/<run>/graph`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.GraphHeader.v1")]
+#[type_name("wg.GraphHeader.v2")]
 pub struct GraphHeader {
     /// [`SCHEMA_VERSION`] of the writer.
     pub schema_version: u32,

@@ -30,7 +30,7 @@
 //!
 //! Every wire type is `#[repr(C)]`, [`bytemuck::Pod`] (no padding, checked
 //! at compile time), `ZeroCopySend` with a versioned type name
-//! (`wg.ObsHeader.v1`), with its size asserted at compile time. The only
+//! (`wg.ObsHeader.v2`), with its size asserted at compile time. The only
 //! `unsafe` code of the workspace's IPC path lives in one private module
 //! (`raw.rs`), each block justified.
 //!
@@ -83,13 +83,13 @@ pub use plan::{
 pub use raw::monotonic_ns;
 pub use seq::{SeqEvent, SeqTracker};
 pub use step::{
-    CELLS_ALIGN, EnvMeta, MAX_CELLS, MAX_ENVS, MAX_GRID_SIDE, ObsBatch, ObsBatchMut, ObsHeader,
-    ObsShape, SENTINEL_BYTE, flags,
+    CELLS_ALIGN, EnvMeta, MAX_CELLS, MAX_ENVS, MAX_GRID_SIDE, MAX_SLICES, ObsBatch, ObsBatchMut,
+    ObsHeader, ObsShape, SENTINEL_BYTE, flags,
 };
 
 /// Version of the wire layout. Bumped on any change of a wire type; every
 /// type name ends in `.v<SCHEMA_VERSION>` and every header carries it.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 #[cfg(test)]
 mod tests {

@@ -68,7 +68,7 @@ impl RouteStatus {
 /// `to_pivot`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.RouteRequest.v1")]
+#[type_name("wg.RouteRequest.v2")]
 pub struct RouteRequest {
     /// Chosen by the client, echoed in the response.
     pub request_id: u64,
@@ -126,7 +126,7 @@ impl RouteRequest {
 /// use the accessors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.RouteResponse.v1")]
+#[type_name("wg.RouteResponse.v2")]
 pub struct RouteResponse {
     /// The request's `request_id`.
     pub request_id: u64,

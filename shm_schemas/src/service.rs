@@ -17,7 +17,7 @@
 //! (one function per channel here), so start order does not matter. The
 //! schema version and the run's shape are part of the service's identity:
 //! the user-header / payload type names carry the version
-//! (`wg.ObsHeader.v1`: iceoryx2 itself refuses another version with
+//! (`wg.ObsHeader.v2`: iceoryx2 itself refuses another version with
 //! `IncompatibleTypes`), and service *attributes* carry
 //! `wg.schema_version`, `wg.num_envs` and `wg.grid` (`"WxH"`), which
 //! `open_or_create_with_attributes` verifies (`IncompatibleAttributes`).
@@ -32,29 +32,33 @@
 //!
 //! | channel | pattern | publishers / subscribers | history | buffer | overflow |
 //! |---|---|---|---|---|---|
-//! | obs | pub/sub `[u64]` + `ObsHeader`, `Static` | 1 / 3 (learner, planner, one spare) | 1 | 2 | safe overflow |
-//! | act | pub/sub `[u8]` + `ActHeader`, `Static` | 1 / 2 (sim, one spare) | 0 | 2 | safe overflow |
+//! | obs | pub/sub `[u64]` + `ObsHeader`, `Static` | 1 / 3 (learner, planner, one spare) | K | 4 | safe overflow |
+//! | act | pub/sub `[u8]` + `ActHeader`, `Static` | 1 / 2 (sim, one spare) | 0 | 4 | safe overflow |
 //! | route | req/resp, fixed size | 1 server / 3 clients, 32 active requests each | – | 1 response | no fire-and-forget |
 //! | graph | pub/sub `[u32]` + `GraphHeader`, `PowerOfTwo` | 1 / 4 | 1 | 1 | safe overflow (latest only) |
 //!
 //! The sim ↔ learner loop is lossless **by protocol**, not by
-//! backpressure: the sim publishes observation batch `k + 1` only after it
-//! received action batch `k`, which the learner sends after it received
-//! observation `k`. So the learner never has more than one unread batch
-//! in its buffer of 2 and safe overflow can never discard one of its
-//! batches. Safe overflow (rather than blocking backpressure) is chosen so
+//! backpressure. The simulator's batch is published as `K` slices
+//! ([`crate::ObsShape::sliced`], `K ≤ MAX_SLICES = 4`; `K = 1` is plain
+//! lock-step), sample `k` holding slice `k mod K`: the sim publishes sample
+//! `k + K` only after it received action batch `k`, which the learner sends
+//! after it received sample `k`. So the learner never has more than `K`
+//! unread samples in its buffer of 4 and safe overflow can never discard
+//! one of them. With `K = 2` the sim steps one half of its batch while the
+//! learner chooses the other half's actions (double-buffered sampling), so
+//! the round trip hides behind a step. Safe overflow (rather than blocking backpressure) is chosen so
 //! that a slow or stuck *planner*, a passive reader of the same stream,
 //! can never stall the simulator: the planner loses the oldest batches
-//! instead and sees the gap in `seq` ([`crate::SeqTracker`]). History 1
-//! lets a restarted learner pick up the batch the sim is waiting on.
+//! instead and sees the gap in `seq` ([`crate::SeqTracker`]). History `K`
+//! lets a restarted learner pick up the sample the sim is waiting on.
 //! One publisher per stream: a second simulator for the same run is
 //! refused (`ExceedsMaxSupportedPublishers`); a crashed one's slot is
 //! reclaimed by dead-node cleanup, which port creation here triggers and
 //! retries.
 //!
-//! Chunks pre-allocated per obs publisher: `3 × (2 + 2) + 1 + 2 = 15`, each
-//! `ObsShape::payload_bytes()` plus 110 bytes of headers (7.6 MB for 1024
-//! envs on the 25×19 maze). The route server pre-allocates
+//! Chunks pre-allocated per obs publisher: `3 × (4 + 2) + K + 2 ≤ 24`, each
+//! `ObsShape::payload_bytes()` plus 110 bytes of headers (at most 12 MB for
+//! 1024 envs on the 25×19 maze). The route server pre-allocates
 //! `clients × 2 × active × (buffer 1 + borrowed 1 + loaned 1) = 576`
 //! responses of 10.8 kB (6.3 MB).
 //!
@@ -115,6 +119,8 @@ pub const ATTR_SCHEMA_VERSION: &str = "wg.schema_version";
 pub const ATTR_NUM_ENVS: &str = "wg.num_envs";
 /// Attribute key: grid size, `"WxH"`.
 pub const ATTR_GRID: &str = "wg.grid";
+/// Attribute key: slices per observation batch ([`crate::ObsShape::slices`]).
+pub const ATTR_SLICES: &str = "wg.slices";
 /// Default time [`PipelineNode`] keeps retrying transient iceoryx2 errors.
 pub const DEFAULT_RETRY_TIMEOUT: Duration = Duration::from_secs(5);
 /// Directory of POSIX shared memory on Linux.
@@ -123,16 +129,18 @@ pub const SHM_DIR: &str = "/dev/shm";
 /// Obs service: subscribers (learner, planner, one spare for a viewer or a
 /// restarted process whose predecessor is not yet cleaned up).
 pub const OBS_MAX_SUBSCRIBERS: usize = 3;
-/// Obs service: per-subscriber queue; ≥ 2 keeps the lock-step learner lossless.
-pub const OBS_BUFFER: usize = 2;
+/// Obs service: per-subscriber queue; ≥ 2 and ≥ [`crate::MAX_SLICES`]
+/// keeps the lock-step learner lossless (it has at most one unread sample
+/// per slice).
+pub const OBS_BUFFER: usize = crate::MAX_SLICES;
 /// Obs service: samples a subscriber may hold at once.
 pub const OBS_MAX_BORROWED: usize = 2;
 /// Obs publisher: samples the simulator may hold loaned at once.
 pub const OBS_MAX_LOANS: usize = 2;
 /// Act service: subscribers (the sim and one spare).
 pub const ACT_MAX_SUBSCRIBERS: usize = 2;
-/// Act service: per-subscriber queue.
-pub const ACT_BUFFER: usize = 2;
+/// Act service: per-subscriber queue (one unread answer per slice at most).
+pub const ACT_BUFFER: usize = crate::MAX_SLICES;
 /// Route service: clients (the learner, a benchmark or tool, one spare).
 pub const ROUTE_MAX_CLIENTS: usize = 3;
 /// Route service: outstanding requests per client.
@@ -735,6 +743,16 @@ fn diagnose<S: Service>(
                             wire: w,
                         })
                 }
+                ATTR_SLICES => {
+                    wire.parse()
+                        .ok()
+                        .zip(ours.parse().ok())
+                        .map(|(w, o)| SchemaError::Slices {
+                            channel,
+                            expected: o,
+                            wire: w,
+                        })
+                }
                 ATTR_NUM_ENVS => {
                     wire.parse()
                         .ok()
@@ -936,6 +954,9 @@ impl<S: Service> PipelineNode<S> {
             types: vec![("user header", type_name_of::<ObsHeader>())],
             attrs: vec![
                 (ATTR_SCHEMA_VERSION, SCHEMA_VERSION.to_string()),
+                // Slices first: another slicing also changes the per-sample
+                // batch size, and the slicing is the cause to name.
+                (ATTR_SLICES, shape.slices.to_string()),
                 (ATTR_NUM_ENVS, shape.num_envs.to_string()),
                 (ATTR_GRID, shape.grid_attr()),
             ],
@@ -953,7 +974,7 @@ impl<S: Service> PipelineNode<S> {
                         .user_header::<ObsHeader>()
                         .max_publishers(1)
                         .max_subscribers(OBS_MAX_SUBSCRIBERS)
-                        .history_size(1)
+                        .history_size(usize::from(shape.slices))
                         .subscriber_max_buffer_size(OBS_BUFFER)
                         .subscriber_max_borrowed_samples(OBS_MAX_BORROWED)
                         .enable_safe_overflow(true)
@@ -1285,6 +1306,7 @@ impl<S: Service> ObsPublisher<S> {
         *sample.user_header_mut() = ObsHeader {
             seq,
             step,
+            slice: (seq % u64::from(self.shape.slices)) as u16,
             ..ObsHeader::new(&self.shape, self.run_id)
         };
         if cfg!(debug_assertions) {

@@ -30,6 +30,8 @@ use crate::{Channel, SCHEMA_VERSION, SchemaError};
 
 /// Most environments in one batch.
 pub const MAX_ENVS: usize = 1024;
+/// Most slices a batch may be published in ([`ObsShape::sliced`]).
+pub const MAX_SLICES: usize = 4;
 /// Longest grid side (width or height) in cells.
 pub const MAX_GRID_SIDE: usize = 64;
 /// Most cells of one environment's grid (`W × H`).
@@ -62,7 +64,7 @@ pub mod flags {
 /// (`sim::Object as u8`) or [`EnvMeta::CARRYING_NOTHING`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.EnvMeta.v1")]
+#[type_name("wg.EnvMeta.v2")]
 pub struct EnvMeta {
     /// Reward of the step that produced this record.
     pub reward: f32,
@@ -135,10 +137,15 @@ pub struct ObsShape {
     pub width: u16,
     /// Grid height in cells (`H`).
     pub height: u16,
+    /// Slices `K` the simulator's batch is split into (1: one sample per
+    /// step of the whole batch). Each sample carries `N` = batch / `K`
+    /// environments; see [`ObsShape::sliced`].
+    pub slices: u16,
 }
 
 impl ObsShape {
-    /// A checked shape: `1 ≤ N ≤ MAX_ENVS`, `1 ≤ W, H ≤ MAX_GRID_SIDE`.
+    /// A checked shape of one slice: `1 ≤ N ≤ MAX_ENVS`,
+    /// `1 ≤ W, H ≤ MAX_GRID_SIDE`.
     pub fn new(num_envs: usize, width: usize, height: usize) -> Result<ObsShape, SchemaError> {
         check_range(Channel::Obs, "num_envs", num_envs, MAX_ENVS)?;
         check_range(Channel::Obs, "width", width, MAX_GRID_SIDE)?;
@@ -147,7 +154,37 @@ impl ObsShape {
             num_envs: num_envs as u32,
             width: width as u16,
             height: height as u16,
+            slices: 1,
         })
+    }
+
+    /// The shape of a batch of `total_envs` environments published as
+    /// `slices` samples of `total_envs / slices` environments each
+    /// (double-buffered sampling: the simulator steps one slice while the
+    /// learner chooses the other's actions). `slices` must divide the batch
+    /// and lie in `1..=MAX_SLICES`.
+    pub fn sliced(
+        total_envs: usize,
+        slices: usize,
+        width: usize,
+        height: usize,
+    ) -> Result<ObsShape, SchemaError> {
+        check_range(Channel::Obs, "slices", slices, MAX_SLICES)?;
+        if total_envs % slices != 0 {
+            return Err(SchemaError::SlicesDoNotDivide {
+                channel: Channel::Obs,
+                slices,
+                total: total_envs,
+            });
+        }
+        let mut shape = ObsShape::new(total_envs / slices, width, height)?;
+        shape.slices = slices as u16;
+        Ok(shape)
+    }
+
+    /// Environments of the whole batch (`N · K`).
+    pub const fn total_envs(&self) -> usize {
+        self.envs() * self.slices as usize
     }
 
     /// `N` as `usize`.
@@ -187,7 +224,7 @@ impl ObsShape {
 /// Header of an observation batch (iceoryx2 user header of `wg/<run>/obs`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Pod, Zeroable)]
 #[repr(C)]
-#[type_name("wg.ObsHeader.v1")]
+#[type_name("wg.ObsHeader.v2")]
 pub struct ObsHeader {
     /// [`SCHEMA_VERSION`] of the writer.
     pub schema_version: u32,
@@ -206,8 +243,11 @@ pub struct ObsHeader {
     pub width: u16,
     /// Grid height (`H`).
     pub height: u16,
-    /// Zero; room for later use without changing the size.
-    pub reserved: u32,
+    /// Which slice of the batch this sample holds (`seq mod slices`):
+    /// environments `slice · N .. (slice + 1) · N` of the simulator.
+    pub slice: u16,
+    /// Slices per batch (`K`, [`ObsShape::slices`]).
+    pub slices: u16,
 }
 
 impl ObsHeader {
@@ -219,6 +259,7 @@ impl ObsHeader {
             run_id,
             width: shape.width,
             height: shape.height,
+            slices: shape.slices,
             ..ObsHeader::default()
         }
     }
@@ -229,6 +270,7 @@ impl ObsHeader {
             num_envs: self.num_envs,
             width: self.width,
             height: self.height,
+            slices: self.slices,
         }
     }
 
@@ -241,6 +283,13 @@ impl ObsHeader {
                 channel: Channel::Obs,
                 expected: (expected.width, expected.height),
                 wire: (self.width, self.height),
+            });
+        }
+        if self.slices != expected.slices || self.slice >= self.slices {
+            return Err(SchemaError::Slices {
+                channel: Channel::Obs,
+                expected: expected.slices,
+                wire: self.slices,
             });
         }
         if self.num_envs != expected.num_envs {
@@ -431,6 +480,30 @@ mod tests {
     }
 
     #[test]
+    fn sliced_shapes_split_the_batch() {
+        let s = ObsShape::sliced(256, 2, 25, 19).unwrap();
+        assert_eq!((s.envs(), s.slices, s.total_envs()), (128, 2, 256));
+        assert_eq!(ObsShape::new(256, 25, 19).unwrap().slices, 1);
+        let e = ObsShape::sliced(10, 4, 5, 5).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "observation batch: 4 slices do not divide a batch of 10 environments"
+        );
+        assert!(ObsShape::sliced(8, 0, 5, 5).is_err());
+        assert!(ObsShape::sliced(10, MAX_SLICES + 1, 5, 5).is_err());
+        // A header of another slicing is refused by name.
+        let mut h = ObsHeader::new(&s, 1);
+        assert!(h.check(&s, 1).is_ok());
+        h.slices = 1;
+        let e = h.check(&s, 1).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("batch in 2 slice(s) expected, publisher sends 1"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn shape_limits() {
         assert!(ObsShape::new(0, 5, 5).is_err());
         assert!(ObsShape::new(MAX_ENVS + 1, 5, 5).is_err());
@@ -442,7 +515,7 @@ mod tests {
     fn write_then_read_views() {
         let s = shape();
         let mut words = vec![0u64; s.payload_words()];
-        let mut header = ObsHeader::default();
+        let mut header = ObsHeader::new(&s, 0);
         {
             let b = ObsBatchMut::new(&mut header, &mut words, &s).unwrap();
             let (h, meta, cells) = b.into_parts();

@@ -76,6 +76,21 @@ impl BatchEnv {
         seed: u64,
         threads: usize,
     ) -> Result<BatchEnv, SimError> {
+        BatchEnv::with_first_index(layout, cfg, 0, n, seed, threads)
+    }
+
+    /// Environments `first .. first + n` of a larger batch, each seeded from
+    /// `(seed, i)` as in that batch: one slice of a batch that is stepped in
+    /// parts (the pipeline's double-buffered sampling), with the same
+    /// trajectories as the whole batch.
+    pub fn with_first_index(
+        layout: Layout,
+        cfg: EnvConfig,
+        first: usize,
+        n: usize,
+        seed: u64,
+        threads: usize,
+    ) -> Result<BatchEnv, SimError> {
         if n == 0 {
             return Err(SimError::Config(
                 "a batch needs at least one environment".into(),
@@ -90,7 +105,7 @@ impl BatchEnv {
         let cells_per_env = layout.width * layout.height;
         let shared = Shared::new(layout, cfg);
         let envs = (0..n)
-            .map(|i| Env::with_shared(Arc::clone(&shared), seed, i as u64))
+            .map(|i| Env::with_shared(Arc::clone(&shared), seed, (first + i) as u64))
             .collect();
         let pool = if threads > 1 {
             Some(

@@ -118,3 +118,60 @@ proptest! {
         prop_assert!(actions.len() < 30 || ends > 0, "episodes ended and reset along the way");
     }
 }
+
+/// The pipeline publishes a batch in slices (`BatchEnv::with_first_index`):
+/// stepping the slices one after the other gives the whole batch's
+/// observations, byte for byte.
+#[test]
+fn a_batch_stepped_in_slices_equals_the_whole_batch() {
+    let layout = Maze::Medium.layout(false);
+    let cfg = EnvConfig::for_task(Task::MultiGoalStochastic, &layout);
+    let (n, k, seed) = (24, 3, 7);
+    let mut whole = BatchEnv::new(layout.clone(), cfg, n, seed, 1).unwrap();
+    let mut parts: Vec<BatchEnv> = (0..k)
+        .map(|s| {
+            BatchEnv::with_first_index(layout.clone(), cfg, s * n / k, n / k, seed, 1).unwrap()
+        })
+        .collect();
+    let mut a = whole.buffers();
+    let mut b = whole.buffers();
+    let cpe = whole.cells_per_env();
+    let per = n / k;
+    let split = |b: &mut sim::StepBuffers, s: usize| -> (Vec<u8>, Vec<EnvMeta>) {
+        (
+            b.cells[s * per * cpe..(s + 1) * per * cpe].to_vec(),
+            b.meta[s * per..(s + 1) * per].to_vec(),
+        )
+    };
+    whole.reset(a.out());
+    for (s, part) in parts.iter_mut().enumerate() {
+        let (mut cells, mut meta) = split(&mut b, s);
+        part.reset(sim::StepOut {
+            cells: &mut cells,
+            meta: &mut meta,
+        });
+        b.cells[s * per * cpe..(s + 1) * per * cpe].copy_from_slice(&cells);
+        b.meta[s * per..(s + 1) * per].copy_from_slice(&meta);
+    }
+    assert_eq!(a.cells, b.cells);
+    for t in 0..300u32 {
+        let actions: Vec<u8> = (0..n as u32)
+            .map(|i| ((i * 7 + t * 13) % 3) as u8)
+            .collect();
+        whole.step(&actions, a.out());
+        for (s, part) in parts.iter_mut().enumerate() {
+            let (mut cells, mut meta) = split(&mut b, s);
+            part.step(
+                &actions[s * per..(s + 1) * per],
+                sim::StepOut {
+                    cells: &mut cells,
+                    meta: &mut meta,
+                },
+            );
+            b.cells[s * per * cpe..(s + 1) * per * cpe].copy_from_slice(&cells);
+            b.meta[s * per..(s + 1) * per].copy_from_slice(&meta);
+        }
+        assert_eq!(a.cells, b.cells, "cells differ at step {t}");
+        assert_eq!(a.meta, b.meta, "metas differ at step {t}");
+    }
+}

@@ -40,6 +40,10 @@ pub struct BenchPipelineArgs {
     /// Environments in the batch.
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
+    /// Slices the pipeline's sim publishes its batch in (see `run --slices`;
+    /// the in-process and socket setups step the whole batch at once).
+    #[arg(long, default_value_t = 2)]
+    pub slices: usize,
     /// Threads stepping the batch (the same in all three setups).
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
@@ -108,8 +112,8 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
         println!("{}", serde_json::to_string(&r)?);
     } else {
         println!(
-            "bench pipeline: {} maze, {} envs, {} sim thread(s), null policy",
-            r.maze, r.envs, a.threads
+            "bench pipeline: {} maze, {} envs ({} slice(s) over shared memory), {} sim thread(s), null policy",
+            r.maze, r.envs, a.slices, a.threads
         );
         println!("  {:<36} {:>14} {:>10}", "setup", "env-steps/s", "ratio");
         println!(
@@ -185,6 +189,7 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
             duration: None,
         },
         envs: a.envs,
+        slices: a.slices,
         threads: a.threads,
         policy: PolicyKind::Random,
         route_every: 0,
@@ -209,7 +214,8 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
         );
     };
     let dt = last["t"].as_f64().unwrap_or(0.0) - first["t"].as_f64().unwrap_or(0.0);
-    let dseq = last["seq"].as_u64().unwrap_or(0) - first["seq"].as_u64().unwrap_or(0);
+    let steps = |l: &serde_json::Value| l["env_steps"].as_u64().unwrap_or(0);
+    let dsteps = steps(last) - steps(first);
     anyhow::ensure!(
         dt > 0.0,
         "the pipeline ran for less than two stats intervals"
@@ -225,7 +231,7 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
     let learner: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
     let lost = learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX);
-    Ok((dseq as f64 * a.envs as f64 / dt, hgrm, lost))
+    Ok((dsteps as f64 / dt, hgrm, lost))
 }
 
 /// One frame on the socket: `seq`, then `N` metas and `N × H × W` cells.

@@ -166,9 +166,12 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
             "--run-dir".into(),
             dir.display().to_string(),
         ]);
+        // The learner's algorithms step the whole batch at once: one slice.
         words.extend([
             "--envs".into(),
             a.envs.to_string(),
+            "--slices".into(),
+            "1".into(),
             "--on-peer-death".into(),
             "exit".into(),
         ]);
@@ -319,6 +322,8 @@ fn build_graph_in_planner(
     words.extend([
         "--envs".into(),
         a.envs.to_string(),
+        "--slices".into(),
+        "1".into(),
         "--node-file".into(),
         nodes.display().to_string(),
     ]);

@@ -35,6 +35,11 @@ pub struct RunCmdArgs {
     /// Environments in the batch.
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
+    /// Slices the sim publishes its batch in (1–4, dividing --envs): with 2
+    /// the sim steps one half while the learner chooses the other half's
+    /// actions (double-buffered sampling); 1 is plain lock-step.
+    #[arg(long, default_value_t = 2)]
+    pub slices: usize,
     /// Threads stepping the batch in the sim process.
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
@@ -78,6 +83,8 @@ impl RunCmdArgs {
             },
             "--envs".into(),
             self.envs.to_string(),
+            "--slices".into(),
+            self.slices.to_string(),
         ]);
         match role {
             Role::Sim => v.extend(["--threads".into(), self.threads.to_string()]),

@@ -57,6 +57,9 @@ pub struct SoakArgs {
     /// Environments in the batch.
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
+    /// Slices the sim publishes its batch in (see `run --slices`).
+    #[arg(long, default_value_t = 2)]
+    pub slices: usize,
     /// The learner asks the planner for a route every this many batches.
     #[arg(long, default_value_t = 1000)]
     pub route_every: u64,
@@ -154,6 +157,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             duration: None,
         },
         envs: a.envs,
+        slices: a.slices,
         threads: 1,
         policy: PolicyKind::Random,
         route_every: a.route_every,

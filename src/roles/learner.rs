@@ -45,6 +45,9 @@ pub struct LearnerServeArgs {
     /// Environments in the batch (must match the sim's).
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
+    /// Slices the sim publishes its batch in (must match the sim's).
+    #[arg(long, default_value_t = 2)]
+    pub slices: usize,
     /// The policy.
     #[arg(long, value_enum, default_value = "random")]
     pub policy: PolicyKind,
@@ -78,7 +81,8 @@ pub struct LearnerReport {
 pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let ctx = RunCtx::new(&a.run)?;
     let (layout, cfg) = a.world.build()?;
-    let shape = ObsShape::new(a.envs, layout.width, layout.height)?;
+    let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+    let per_slice = shape.envs();
     let num_actions = cfg.task.num_actions();
     let opts = ShmEnvOptions {
         node_name: LEARNER_NODE.into(),
@@ -102,19 +106,28 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         Err(EnvError::Interrupted) => return Ok(std::process::ExitCode::SUCCESS),
         Err(e) => return Err(e.into()),
     };
-    let mut policy: Box<dyn Policy> = match a.policy {
-        PolicyKind::Random => Box::new(RandomPolicy::new(num_actions, a.world.seed ^ 0x5eed)),
-        PolicyKind::ActorCritic => Box::new(ActorCriticPolicy::new(
-            &ActorCriticConfig {
-                num_actions: num_actions as i64,
-                ..ActorCriticConfig::default()
-            },
-            a.envs,
-            layout.width,
-            layout.height,
-            a.world.seed,
-        )),
-    };
+    // One policy per slice: sample k holds slice k mod K, and each slice's
+    // environments keep their own recurrent state.
+    let mut policies: Vec<Box<dyn Policy>> = (0..a.slices as u64)
+        .map(|k| -> Box<dyn Policy> {
+            match a.policy {
+                PolicyKind::Random => Box::new(RandomPolicy::new(
+                    num_actions,
+                    sim::env_seed(a.world.seed ^ 0x5eed, k),
+                )),
+                PolicyKind::ActorCritic => Box::new(ActorCriticPolicy::new(
+                    &ActorCriticConfig {
+                        num_actions: num_actions as i64,
+                        ..ActorCriticConfig::default()
+                    },
+                    per_slice,
+                    layout.width,
+                    layout.height,
+                    a.world.seed,
+                )),
+            }
+        })
+        .collect();
     let route_client = if a.route_every > 0 {
         Some(env.node().route_client()?)
     } else {
@@ -141,7 +154,7 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let pid = std::process::id();
     let stream_line = |s: StreamStats| serde_json::json!({ "pid": pid, "stream": s }).to_string();
     let mut planner = PeerWatch::new(PLANNER_NODE);
-    let mut actions = vec![0u8; a.envs];
+    let mut actions = vec![0u8; per_slice];
     let (mut batches, mut episodes, mut return_sum) = (0u64, 0u64, 0f64);
     let (mut routes_ok, mut routes_requested) = (0u64, 0u64);
     let mut next_log = Instant::now() + Duration::from_secs(1);
@@ -154,7 +167,7 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         lat.record("obs_one_way", env.last_latency_ns());
         let t0 = Instant::now();
-        policy.act(&obs, &mut actions);
+        policies[(obs.seq % a.slices as u64) as usize].act(&obs, &mut actions);
         lat.record("policy", t0.elapsed().as_nanos() as u64);
         let (cell, dir) = {
             let m = obs.meta[0];
@@ -218,7 +231,7 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     drop((route_client, graph, env));
     ctx.tidy();
     let report = LearnerReport {
-        policy: policy.name().to_string(),
+        policy: policies[0].name().to_string(),
         stream,
         batches,
         episodes,

@@ -3,8 +3,16 @@
 //! shared-memory sample** (no intermediate copy), then waits for the action
 //! batch that answers it (lock-step, see `shm_schemas::service`).
 //!
-//! Hot-loop histograms: `step` (stepping N environments into the sample),
-//! `action_round_trip` (publish of observation k → receipt of action k).
+//! With `--slices K` (default 2) the batch is `K` slices of `N / K`
+//! environments, published as separate samples, and up to `K` samples are
+//! awaiting their actions at once: the sim steps slice 1 while the learner
+//! chooses slice 0's actions (double-buffered sampling, as in Sample
+//! Factory). Each slice is still lock-step with its own actions; the
+//! environments and their trajectories are the same for every `K`.
+//!
+//! Hot-loop histograms: `step` (stepping one sample's environments into
+//! it), `publish` (its `send`), `action_round_trip` (publish of sample k →
+//! receipt of action k).
 
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -20,7 +28,7 @@ use sim::{BatchEnv, StepOut};
 use super::{
     EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE,
 };
-use crate::latency::Latencies;
+use crate::latency::{Latencies, Recorder};
 use crate::world::WorldArgs;
 
 /// `sim serve` options.
@@ -33,6 +41,11 @@ pub struct SimServeArgs {
     /// Environments in the batch.
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
+    /// Slices the batch is published in (1–4, dividing --envs): with 2 the
+    /// sim steps one half while the learner chooses the other half's
+    /// actions. Every process of a run must use the same value.
+    #[arg(long, default_value_t = 2)]
+    pub slices: usize,
     /// Threads stepping the batch (1 leaves the other core to the learner).
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
@@ -41,7 +54,7 @@ pub struct SimServeArgs {
 /// What the sim reports at exit (`sim.report.json`).
 #[derive(Debug, Serialize)]
 pub struct SimReport {
-    /// Batches published.
+    /// Samples published (each one slice of the batch).
     pub batches: u64,
     /// Environment steps taken.
     pub env_steps: u64,
@@ -80,8 +93,10 @@ struct StatsLine {
     unix_ms: u64,
     /// Process id (a restarted sim appends to the same file).
     pid: u32,
-    /// Last published batch.
+    /// Samples answered so far (the oldest awaited sample's number).
     seq: u64,
+    /// Environment steps taken so far by this process.
+    env_steps: u64,
     /// Env-steps/s over the interval.
     steps_per_sec: f64,
     /// Round-trip p99 over the interval (µs).
@@ -100,8 +115,20 @@ struct StatsLine {
 pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let ctx = RunCtx::new(&a.run)?;
     let (layout, cfg) = a.world.build()?;
-    let shape = ObsShape::new(a.envs, layout.width, layout.height)?;
-    let mut batch = BatchEnv::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
+    let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+    let per_slice = shape.envs();
+    let mut slices = (0..a.slices)
+        .map(|k| {
+            BatchEnv::with_first_index(
+                layout.clone(),
+                cfg,
+                k * per_slice,
+                per_slice,
+                a.world.seed,
+                a.threads,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), SIM_NODE)?;
     let cleaned = node.cleanup_dead_nodes();
     if cleaned.cleanups > 0 {
@@ -114,24 +141,35 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         .obs_publisher(shape)
         .context("sim: cannot open the observation service")?;
     let actions = node
-        .act_subscriber(a.envs)
+        .act_subscriber(per_slice)
         .context("sim: cannot open the action service")?;
     tracing::info!(
-        "sim: run '{}', {} x {}x{} {} on '{}', publishing",
+        "sim: run '{}', {} x {}x{} {} on '{}' in {} slice(s), publishing",
         ctx.run,
         a.envs,
         shape.width,
         shape.height,
         cfg.task,
-        batch.layout().name
+        layout.name,
+        a.slices
     );
 
+    // The per-sample loop records into bare recorders (no name lookups);
+    // every stats interval they are folded into the named histograms.
     let mut lat = Latencies::new("sim");
-    lat.register("step");
-    lat.register("action_round_trip");
-    let mut interval = Latencies::new("sim");
-    interval.register("action_round_trip");
-    let mut minute = interval.clone();
+    for h in ["step", "action_round_trip", "publish"] {
+        lat.register(h);
+    }
+    let (mut step_rec, mut publish_rec) = (Recorder::new(), Recorder::new());
+    let (mut rtt_interval, mut rtt_minute) = (Recorder::new(), Recorder::new());
+    let fold =
+        |lat: &mut Latencies, step: &mut Recorder, publish: &mut Recorder, rtt: &Recorder| {
+            lat.absorb("step", step);
+            lat.absorb("publish", publish);
+            lat.absorb("action_round_trip", rtt);
+            step.reset();
+            publish.reset();
+        };
     let mut stats = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
@@ -139,16 +177,24 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let pid = std::process::id();
     let mut learner = PeerWatch::new(LEARNER_NODE);
 
-    // Batch 0: the first observations, written in place.
-    let mut seq = 0u64;
-    let mut sample = publisher.loan(seq, 0)?;
-    {
-        let (_, meta, cells) = sample.batch_mut().into_parts();
-        batch.reset(StepOut { cells, meta });
+    // Samples 0..K: every slice's first observations, written in place.
+    // `seq` is the oldest sample awaiting its actions; samples seq..seq+K
+    // are out, sample k holding slice k mod K; `sent_at[k mod K]` is when
+    // sample k was published.
+    let k_slices = a.slices as u64;
+    let mut sent_at = vec![Instant::now(); a.slices];
+    for (k, batch) in slices.iter_mut().enumerate() {
+        let mut sample = publisher.loan(k as u64, 0)?;
+        {
+            let (_, meta, cells) = sample.batch_mut().into_parts();
+            batch.reset(StepOut { cells, meta });
+        }
+        sample.send()?;
+        sent_at[k] = Instant::now();
     }
-    sample.send()?;
-    let mut sent_at = Instant::now();
-    let started = sent_at;
+    let mut seq = 0u64;
+    let started = sent_at[0];
+    let mut last_sent = started;
     let (mut env_steps, mut episodes, mut stale) = (0u64, 0u64, 0u64);
     let mut next_stats = started + STATS_EVERY;
     let mut next_minute = started + Duration::from_secs(60);
@@ -200,65 +246,70 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             }
         };
         let now = Instant::now();
-        let rtt = (now - sent_at).as_nanos() as u64;
-        lat.record("action_round_trip", rtt);
-        interval.record("action_round_trip", rtt);
-        minute.record("action_round_trip", rtt);
+        let slice = (seq % k_slices) as usize;
+        rtt_interval.record((now - sent_at[slice]).as_nanos() as u64);
 
-        // Step straight into the next loaned sample.
-        seq += 1;
-        let mut sample = publisher.loan(seq, seq)?;
+        // Step this slice straight into its next loaned sample.
+        let next = seq + k_slices;
+        let mut sample = publisher.loan(next, next / k_slices)?;
         {
             let (_, meta, cells) = sample.batch_mut().into_parts();
-            batch.step(act.actions(), StepOut { cells, meta });
+            slices[slice].step(act.actions(), StepOut { cells, meta });
             episodes += meta.iter().filter(|m| m.done()).count() as u64;
         }
         drop(act);
         let stepped = Instant::now();
-        lat.record("step", (stepped - now).as_nanos() as u64);
+        step_rec.record((stepped - now).as_nanos() as u64);
         sample.send()?;
-        sent_at = Instant::now();
-        env_steps += a.envs as u64;
+        let sent = Instant::now();
+        sent_at[slice] = sent;
+        last_sent = sent;
+        publish_rec.record((sent - stepped).as_nanos() as u64);
+        env_steps += per_slice as u64;
+        seq += 1;
 
-        if sent_at >= next_stats {
-            let dt = (sent_at - last_stats_t).as_secs_f64();
+        if sent >= next_stats {
+            let dt = (last_sent - last_stats_t).as_secs_f64();
             let mut line = StatsLine {
-                t: (sent_at - started).as_secs_f64(),
+                t: (last_sent - started).as_secs_f64(),
                 unix_ms: std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
                     .map_or(0, |d| d.as_millis() as u64),
                 pid,
                 seq,
-                steps_per_sec: (seq - last_stats_seq) as f64 * a.envs as f64 / dt,
-                roundtrip_p99_us: interval.percentile_us("action_round_trip", 99.0),
+                env_steps,
+                steps_per_sec: (seq - last_stats_seq) as f64 * per_slice as f64 / dt,
+                roundtrip_p99_us: rtt_interval.percentile_us(99.0),
                 learner_alive: !learner.gone,
                 minute: None,
                 minute_roundtrip_p99_us: None,
             };
-            if sent_at >= next_minute {
+            fold(&mut lat, &mut step_rec, &mut publish_rec, &rtt_interval);
+            rtt_minute.absorb(&rtt_interval);
+            rtt_interval.reset();
+            if last_sent >= next_minute {
                 line.minute = Some(minutes);
-                line.minute_roundtrip_p99_us =
-                    Some(minute.percentile_us("action_round_trip", 99.0));
-                minute.reset();
+                line.minute_roundtrip_p99_us = Some(rtt_minute.percentile_us(99.0));
+                rtt_minute.reset();
                 minutes += 1;
                 next_minute += Duration::from_secs(60);
             }
             writeln!(stats, "{}", serde_json::to_string(&line)?)?;
             ctx.report_on_request(&lat);
-            interval.reset();
-            (last_stats_seq, last_stats_t) = (seq, sent_at);
-            next_stats = sent_at + STATS_EVERY;
+            (last_stats_seq, last_stats_t) = (seq, last_sent);
+            next_stats = last_sent + STATS_EVERY;
             if ctx.should_stop() {
                 break;
             }
         }
     }
 
+    fold(&mut lat, &mut step_rec, &mut publish_rec, &rtt_interval);
     drop((actions, publisher, node));
     ctx.tidy();
-    let seconds = (sent_at - started).as_secs_f64().max(1e-9);
+    let seconds = (last_sent - started).as_secs_f64().max(1e-9);
     let report = SimReport {
-        batches: seq + 1,
+        batches: seq + k_slices,
         env_steps,
         seconds,
         steps_per_sec: env_steps as f64 / seconds,
