@@ -36,16 +36,45 @@ fn read_json(dir: &Path, name: &str) -> serde_json::Value {
     serde_json::from_slice(&bytes).expect("valid JSON")
 }
 
+/// A role's process, killed when dropped: a failing assertion must not
+/// leave a spinning process behind to disturb the tests and benchmarks that
+/// run after it.
+struct Proc(Child);
+
+impl std::ops::Deref for Proc {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Proc {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
 /// Starts one role; its stderr goes to `<dir>/<log>`.
-fn role(dir: &Path, log: &str, args: &[&str]) -> Child {
+fn role(dir: &Path, log: &str, args: &[&str]) -> Proc {
     let f = std::fs::File::create(dir.join(log)).unwrap();
-    Command::new(exe())
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(f)
-        .spawn()
-        .expect("spawn role")
+    Proc(
+        Command::new(exe())
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(f)
+            .spawn()
+            .expect("spawn role"),
+    )
 }
 
 /// Polls `cond` every 50 ms until it holds or `limit` passes.

@@ -189,7 +189,9 @@ impl BatchEnv {
     }
 
     /// Steps environment `i` with `actions[i]` for every `i`, in parallel.
-    pub fn step(&mut self, actions: &[u8], out: StepOut<'_>) {
+    /// Returns how many episodes ended in this step (counted while each
+    /// environment's record is hot, so callers need no second pass).
+    pub fn step(&mut self, actions: &[u8], out: StepOut<'_>) -> usize {
         self.check(&out);
         assert_eq!(actions.len(), self.len(), "one action per environment");
         let (cpe, chunk) = (self.cells_per_env, self.chunk);
@@ -201,9 +203,10 @@ impl BatchEnv {
                     .zip(actions.par_chunks(chunk))
                     .zip(cells.par_chunks_mut(chunk * cpe))
                     .zip(meta.par_chunks_mut(chunk))
-                    .for_each(|(((envs, actions), cells), meta)| {
+                    .map(|(((envs, actions), cells), meta)| {
                         step_chunk(envs, actions, cells, meta, cpe)
-                    });
+                    })
+                    .sum()
             }),
             None => step_chunk(envs, actions, cells, meta, cpe),
         }
@@ -217,7 +220,8 @@ fn step_chunk(
     cells: &mut [u8],
     meta: &mut [EnvMeta],
     cpe: usize,
-) {
+) -> usize {
+    let mut ended = 0;
     for (((env, &a), c), m) in envs
         .iter_mut()
         .zip(actions)
@@ -225,5 +229,7 @@ fn step_chunk(
         .zip(meta.iter_mut())
     {
         env.step(a, c, m);
+        ended += usize::from(m.done());
     }
+    ended
 }
