@@ -2,5 +2,7 @@
 
 // The `worldgraph` command line: sim render/trace, bench sim, layout errors.
 mod cli;
+// World-graph discovery: in-process equals pipeline; resume after a kill.
+mod discover;
 // The three processes over shared memory: exchange, refusal, death and rejoin.
 mod pipeline;

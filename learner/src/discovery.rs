@@ -163,6 +163,10 @@ struct State {
     best_accuracy: f64,
     rounds_without_improvement: u32,
     buffer: Vec<(Vec<(u32, u8, u8)>, Vec<u8>)>,
+    /// The latent model's Lagrange multipliers (eq. 3), which live outside
+    /// its weights; `None` only in checkpoints written before they were kept.
+    #[serde(default)]
+    multipliers: Option<crate::vae::Multipliers>,
 }
 
 /// The discovery loop's models and bookkeeping.
@@ -231,6 +235,9 @@ struct Walker {
     actions: Vec<u8>,
 }
 
+/// RNG stream of the final evaluation (far from any round's index).
+const EVALUATION_STREAM: u64 = 0xE7A1_0000;
+
 impl Discovery {
     /// A fresh discovery on `layout` with `num_envs` environments.
     pub fn new(
@@ -256,6 +263,7 @@ impl Discovery {
             best_accuracy: 0.0,
             rounds_without_improvement: 0,
             buffer: Vec::new(),
+            multipliers: None,
         };
         Ok(Discovery {
             layout: layout.clone(),
@@ -299,6 +307,23 @@ impl Discovery {
     /// The goal-conditioned policy.
     pub fn gcp(&mut self) -> &mut GoalConditionedPolicy {
         &mut self.gcp
+    }
+
+    /// `π_g`'s success rate on goals `goal_walk_len` random moves away,
+    /// from freshly reset environments and RNGs seeded from the run's seed:
+    /// the same figure whether or not the run was interrupted.
+    pub fn evaluate_gcp(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+        goal_walk_len: usize,
+        steps: usize,
+    ) -> Result<f64, LearnerError> {
+        let n = env.num_envs();
+        env.step(&vec![action::RESET; n])
+            .map_err(LearnerError::from)?;
+        self.gcp
+            .start_round(sim::env_seed(self.state.config.seed, EVALUATION_STREAM))?;
+        Ok(self.gcp.evaluate(env, goal_walk_len, steps)?)
     }
 
     /// True when the accuracy plateaued or the round budget is spent.
@@ -427,9 +452,12 @@ impl Discovery {
         let cfg = self.state.config.clone();
         let round = self.state.rounds_done;
         let mut rng = SmallRng::seed_from_u64(sim::env_seed(cfg.seed, 0x100_0000 + round as u64));
-        self.latent
-            .model_mut()
-            .reseed_noise(sim::env_seed(cfg.seed, round as u64));
+        // Everything random in a round is seeded from (seed, round), and the
+        // optimisers start afresh: a round depends on the checkpoint only.
+        let round_seed = sim::env_seed(cfg.seed, round as u64);
+        self.latent.model_mut().reseed_noise(round_seed);
+        self.latent.reset_optimizer()?;
+        self.gcp.start_round(round_seed)?;
         let n = env.num_envs();
         env.step(&vec![action::RESET; n])
             .map_err(LearnerError::from)?;
@@ -545,6 +573,7 @@ impl Discovery {
                 )
             })
             .collect();
+        self.state.multipliers = Some(*self.latent.model().multipliers());
         let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e))?;
         self.state.buffer.clear();
         let path = dir.join("state.json");
@@ -574,6 +603,9 @@ impl Discovery {
             .load(&latent)
             .map_err(|e| ckpt(&latent, e))?;
         self.gcp.load(&dir.join("gcp.ot"))?;
+        if let Some(m) = state.multipliers {
+            self.latent.model_mut().set_multipliers(m);
+        }
         self.buffer = state
             .buffer
             .iter()

@@ -561,6 +561,23 @@ impl GoalConditionedPolicy {
         })
     }
 
+    /// Starts a round of the discovery loop from the weights alone: goal
+    /// samplers and the action RNG reseeded from `seed`, the LSTM state
+    /// zeroed, open goal episodes dropped and a fresh Adam optimiser (its
+    /// moments are not part of a checkpoint). A round is then a function of
+    /// the checkpoint and `seed`, so a resumed run repeats an uninterrupted
+    /// one exactly.
+    pub fn start_round(&mut self, seed: u64) -> Result<(), LearnerError> {
+        self.sampler.rng = SmallRng::seed_from_u64(seed);
+        self.eval_sampler.rng = SmallRng::seed_from_u64(seed ^ EVAL_SEED_SALT);
+        self.action_rng = SmallRng::seed_from_u64(seed ^ ACTION_SEED_SALT);
+        self.state = self.net.zero_state(self.num_envs as i64);
+        self.book.episodes.clear();
+        self.book.finished.clear();
+        self.opt = nn::Adam::default().build(&self.vs, self.cfg.learning_rate)?;
+        Ok(())
+    }
+
     /// The configuration.
     pub fn config(&self) -> &GcpConfig {
         &self.cfg

@@ -216,7 +216,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         ));
     }
     bar.finish_and_clear();
-    let gcp_success = disc.gcp().evaluate(env.as_mut(), 10, 200)?;
+    let gcp_success = disc.evaluate_gcp(env.as_mut(), 10, 200)?;
     drop(env);
     if let Some(mut p) = pipeline {
         p.stop_all(Duration::from_secs(3));

@@ -494,6 +494,14 @@ impl LatentTrainer {
         Ok(Self { vs, model, opt })
     }
 
+    /// A fresh Adam optimiser (moments are not part of a checkpoint; the
+    /// discovery loop starts every round with one, so resuming repeats an
+    /// uninterrupted run).
+    pub fn reset_optimizer(&mut self) -> Result<(), LearnerError> {
+        self.opt = nn::Adam::default().build(&self.vs, self.model.cfg.learning_rate)?;
+        Ok(())
+    }
+
     /// One step of [`LatentModel::train_step`].
     pub fn train_step(&mut self, batch: &TrajectoryBatch) -> LatentStats {
         self.model.train_step(&mut self.opt, batch)

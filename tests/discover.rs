@@ -1,0 +1,106 @@
+//! `worldgraph discover` as a user runs it: the same seed gives the same
+//! world graph in one process and as the pipeline's processes, and a run
+//! killed mid-way resumes to exactly what an uninterrupted run gives.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A short discovery on the small maze (3 rounds, 8 environments).
+fn discover_args(run: &Path) -> Vec<String> {
+    [
+        "discover", "--maze", "small", "--seed", "3", "--rounds", "3", "--envs", "8", "--json",
+        "--run",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .chain([run.display().to_string()])
+    .collect()
+}
+
+/// Runs to the end and returns the summary without its timings.
+fn summary(args: &[String]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run worldgraph");
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout.lines().last().expect("a summary line");
+    let mut v: serde_json::Value = serde_json::from_str(line).expect("JSON summary");
+    let o = v.as_object_mut().expect("an object");
+    for timing in ["wall_seconds", "train_steps_per_sec", "transport"] {
+        assert!(o.remove(timing).is_some(), "summary lacks {timing}: {line}");
+    }
+    v
+}
+
+#[test]
+fn discovery_gives_the_same_graph_in_process_and_over_the_pipeline() {
+    let dir = tempfile::tempdir().unwrap();
+    let in_process = summary(&discover_args(&dir.path().join("a")));
+    let mut args = discover_args(&dir.path().join("b"));
+    args.push("--pipeline".into());
+    let pipeline = summary(&args);
+    assert!(
+        in_process["pivotal_states"].as_u64().unwrap() > 0,
+        "{in_process}"
+    );
+    assert!(in_process["edges"].as_u64().unwrap() > 0, "{in_process}");
+    assert_eq!(in_process, pipeline);
+    for run in ["a", "b"] {
+        for file in [
+            "graph.json",
+            "graph.png",
+            "pivotal.png",
+            "discovery_curves.png",
+            "checkpoint/latent.ot",
+        ] {
+            assert!(
+                dir.path().join(run).join(file).is_file(),
+                "{run}/{file} missing"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_killed_discovery_resumes_to_the_uninterrupted_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = summary(&discover_args(&dir.path().join("whole")));
+
+    let run = dir.path().join("killed");
+    let args = discover_args(&run);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(&args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it as soon as the first round's checkpoint is written.
+    let state = run.join("checkpoint").join("state.json");
+    let until = Instant::now() + Duration::from_secs(120);
+    while !state.is_file() && Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(state.is_file(), "no checkpoint within 120 s");
+    let rounds_done = serde_json::from_slice::<serde_json::Value>(&std::fs::read(&state).unwrap())
+        .unwrap()["rounds_done"]
+        .as_u64()
+        .unwrap();
+    assert!(
+        rounds_done < 3,
+        "the run finished before the kill ({rounds_done} rounds)"
+    );
+
+    let resumed = summary(&args);
+    assert_eq!(whole, resumed);
+}
