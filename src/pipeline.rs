@@ -195,6 +195,16 @@ impl Pipeline {
         Ok(())
     }
 
+    /// Sends `signal` to every running process (e.g. SIGSTOP/SIGCONT to
+    /// pause the pipeline while a benchmark measures its baseline).
+    pub fn signal_all(&self, signal: Signal) {
+        for s in &self.slots {
+            if let Some(c) = &s.child {
+                let _ = kill(Pid::from_raw(c.id() as i32), signal);
+            }
+        }
+    }
+
     /// Waits up to `grace` for every process to exit by itself, then
     /// SIGTERMs the rest, waits `grace` again and SIGKILLs what remains.
     /// Returns each role's last exit status.

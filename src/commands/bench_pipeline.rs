@@ -3,7 +3,10 @@
 //!
 //! 1. **in-process**: the simulator and the null policy in one loop, no IPC
 //!    (the upper bound).
-//! 2. **ipc**: the three processes over iceoryx2 shared memory (`run`).
+//! 2. **ipc**: the three processes over iceoryx2 shared memory (`run`),
+//!    measured in windows alternating with the in-process loop's (the
+//!    pipeline paused meanwhile), so the ratio of the two is not at the
+//!    mercy of the machine's speed drifting between two long phases.
 //! 3. **socket**: the same three processes' data flow over Unix domain
 //!    sockets: the sim writes every observation batch (metas + cells) into
 //!    the learner's and the planner's sockets, the learner copies it out,
@@ -12,7 +15,7 @@
 //! Throughput is env-steps per second; round trips are the sim's publish of
 //! observation `k` → receipt of action `k`.
 
-use std::io::{BufRead, Read, Write};
+use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -21,6 +24,7 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::policy::{Policy, RandomPolicy};
+use nix::sys::signal::Signal;
 use serde::Serialize;
 use shm_schemas::EnvMeta;
 use sim::{BatchEnv, StepOut};
@@ -47,7 +51,8 @@ pub struct BenchPipelineArgs {
     /// Threads stepping the batch (the same in all three setups).
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
-    /// Seconds measured per setup (after a one-second warm-up).
+    /// Seconds measured per setup (after a warm-up); in-process and
+    /// shared memory alternate in 5 windows of a fifth each.
     #[arg(long, default_value_t = 5.0)]
     pub seconds: f64,
     /// Print one JSON object instead of a table.
@@ -68,7 +73,7 @@ pub struct PipelineBenchReport {
     pub inprocess_steps_per_sec: f64,
     /// Env-steps/s over Unix domain sockets.
     pub socket_steps_per_sec: f64,
-    /// `ipc / inprocess`.
+    /// Median over the rounds of `ipc / inprocess` measured back to back.
     pub ipc_to_inprocess: f64,
     /// `ipc / socket`.
     pub ipc_to_socket: f64,
@@ -90,8 +95,13 @@ pub struct PipelineBenchReport {
 pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
     let (layout, _) = a.world.build()?;
-    let inprocess = bench_inprocess(&a)?;
-    let (ipc, rtt, lost) = bench_ipc(&a)?;
+    let Interleaved {
+        inprocess,
+        ipc,
+        ratio,
+        rtt,
+        lost,
+    } = bench_interleaved(&a)?;
     let (socket, srtt) = bench_socket(&a)?;
     let r = PipelineBenchReport {
         envs: a.envs,
@@ -99,7 +109,7 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
         ipc_steps_per_sec: ipc,
         inprocess_steps_per_sec: inprocess,
         socket_steps_per_sec: socket,
-        ipc_to_inprocess: ipc / inprocess,
+        ipc_to_inprocess: ratio,
         ipc_to_socket: ipc / socket,
         roundtrip_p50_us: rtt.0,
         roundtrip_p99_us: rtt.1,
@@ -149,28 +159,87 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
     Ok(std::process::ExitCode::SUCCESS)
 }
 
-fn bench_inprocess(a: &BenchPipelineArgs) -> anyhow::Result<f64> {
-    let (layout, cfg) = a.world.build()?;
-    let mut env = InProcess::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
-    let mut policy = RandomPolicy::new(env.num_actions(), a.world.seed);
-    let mut actions = vec![0u8; a.envs];
-    let mut steps = |until: Instant| -> anyhow::Result<u64> {
-        let mut n = 0;
-        while Instant::now() < until {
-            policy.act(&env.observe(), &mut actions);
-            env.step(&actions)?;
-            n += 1;
-        }
-        Ok(n)
-    };
-    steps(Instant::now() + Duration::from_secs(1))?;
-    let t0 = Instant::now();
-    let n = steps(t0 + Duration::from_secs_f64(a.seconds))?;
-    Ok((n * a.envs as u64) as f64 / t0.elapsed().as_secs_f64())
+/// The in-process setup: the simulator and the null policy in one loop.
+struct InProcessLoop {
+    env: InProcess,
+    policy: RandomPolicy,
+    actions: Vec<u8>,
+    envs: usize,
 }
 
-/// Throughput from the sim's per-interval stats, skipping the first second.
-fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64)> {
+impl InProcessLoop {
+    fn new(a: &BenchPipelineArgs) -> anyhow::Result<InProcessLoop> {
+        let (layout, cfg) = a.world.build()?;
+        let env = InProcess::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
+        let policy = RandomPolicy::new(env.num_actions(), a.world.seed);
+        Ok(InProcessLoop {
+            env,
+            policy,
+            actions: vec![0u8; a.envs],
+            envs: a.envs,
+        })
+    }
+
+    /// Env-steps per second over `d`.
+    fn run_for(&mut self, d: Duration) -> anyhow::Result<f64> {
+        let t0 = Instant::now();
+        let until = t0 + d;
+        let mut n = 0u64;
+        while Instant::now() < until {
+            self.policy.act(&self.env.observe(), &mut self.actions);
+            self.env.step(&self.actions)?;
+            n += 1;
+        }
+        Ok((n * self.envs as u64) as f64 / t0.elapsed().as_secs_f64())
+    }
+}
+
+/// The sim's latest progress line (`t`, `env_steps`) in `sim.stats.jsonl`.
+fn sim_progress(dir: &std::path::Path) -> Option<(f64, u64)> {
+    let text = std::fs::read_to_string(dir.join("sim.stats.jsonl")).ok()?;
+    let line: serde_json::Value = serde_json::from_str(text.lines().last()?).ok()?;
+    Some((line["t"].as_f64()?, line["env_steps"].as_u64()?))
+}
+
+/// Waits (up to 5 s) for a progress line newer than `after`.
+fn next_progress(dir: &std::path::Path, after: Option<(f64, u64)>) -> anyhow::Result<(f64, u64)> {
+    let until = Instant::now() + Duration::from_secs(5);
+    loop {
+        if let Some(p) = sim_progress(dir)
+            && after.is_none_or(|a| p.0 > a.0)
+        {
+            return Ok(p);
+        }
+        anyhow::ensure!(
+            Instant::now() < until,
+            "the pipeline made no progress; see {}",
+            dir.display()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// What the interleaved measurement gives.
+struct Interleaved {
+    inprocess: f64,
+    ipc: f64,
+    ratio: f64,
+    rtt: (f64, f64, f64),
+    lost: u64,
+}
+
+/// The in-process loop and the three processes over shared memory, measured
+/// in alternating windows (`ROUNDS` of each, the pipeline paused with
+/// SIGSTOP while the in-process loop runs), so that drift in the machine's
+/// speed (a shared VM's neighbours) hits both alike. Throughputs and their
+/// ratio are medians over the rounds; a pipeline window is timed by the
+/// sim's own progress lines (every 250 ms).
+fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
+    const ROUNDS: usize = 5;
+    let window = Duration::from_secs_f64((a.seconds / ROUNDS as f64).max(0.5));
+    let mut local = InProcessLoop::new(a)?;
+    local.run_for(Duration::from_secs(1))?; // warm-up
+
     let dir = tempfile::tempdir()?;
     let run = format!("bench-{}", std::process::id());
     let args = RunCmdArgs {
@@ -197,41 +266,63 @@ fn bench_ipc(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64, f64), u64
     };
     let mut p = args.pipeline()?;
     p.start_all()?;
-    std::thread::sleep(Duration::from_secs_f64(a.seconds + 1.5));
+    let measured = (|| -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+        // Warm-up: the planner builds its graph, the learner connects.
+        let first = next_progress(dir.path(), None)?;
+        std::thread::sleep(Duration::from_secs(1));
+        next_progress(dir.path(), Some(first))?;
+        let (mut local_rates, mut ipc_rates) = (Vec::new(), Vec::new());
+        for _ in 0..ROUNDS {
+            p.signal_all(Signal::SIGSTOP);
+            local_rates.push(local.run_for(window)?);
+            p.signal_all(Signal::SIGCONT);
+            std::thread::sleep(Duration::from_millis(200));
+            let start = next_progress(dir.path(), sim_progress(dir.path()))?;
+            std::thread::sleep(window);
+            let end = next_progress(dir.path(), sim_progress(dir.path()))?;
+            anyhow::ensure!(end.0 > start.0, "the pipeline's clock did not advance");
+            ipc_rates.push((end.1 - start.1) as f64 / (end.0 - start.0));
+        }
+        Ok((local_rates, ipc_rates))
+    })();
+    p.signal_all(Signal::SIGCONT);
     p.stop_all(Duration::from_secs(3));
     teardown(&run)?;
-    let stats = std::fs::File::open(dir.path().join("sim.stats.jsonl"))?;
-    let lines: Vec<serde_json::Value> = std::io::BufReader::new(stats)
-        .lines()
-        .map_while(Result::ok)
-        .filter_map(|l| serde_json::from_str(&l).ok())
+    let (local_rates, ipc_rates) = measured?;
+    let ratios: Vec<f64> = ipc_rates
+        .iter()
+        .zip(&local_rates)
+        .map(|(i, l)| i / l)
         .collect();
-    let first = lines.iter().find(|l| l["t"].as_f64().unwrap_or(0.0) >= 1.0);
-    let (Some(first), Some(last)) = (first, lines.last()) else {
-        anyhow::bail!(
-            "the pipeline made no progress; see {}",
-            dir.path().display()
-        );
-    };
-    let dt = last["t"].as_f64().unwrap_or(0.0) - first["t"].as_f64().unwrap_or(0.0);
-    let steps = |l: &serde_json::Value| l["env_steps"].as_u64().unwrap_or(0);
-    let dsteps = steps(last) - steps(first);
-    anyhow::ensure!(
-        dt > 0.0,
-        "the pipeline ran for less than two stats intervals"
-    );
+
     let sim: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("sim.report.json"))?)?;
     let pct = |k: &str| sim[k].as_f64().unwrap_or(f64::NAN);
-    let hgrm = (
-        pct("roundtrip_p50_us"),
-        pct("roundtrip_p99_us"),
-        pct("roundtrip_p999_us"),
-    );
     let learner: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
-    let lost = learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX);
-    Ok((dsteps as f64 / dt, hgrm, lost))
+    Ok(Interleaved {
+        inprocess: median(local_rates),
+        ipc: median(ipc_rates),
+        ratio: median(ratios),
+        rtt: (
+            pct("roundtrip_p50_us"),
+            pct("roundtrip_p99_us"),
+            pct("roundtrip_p999_us"),
+        ),
+        lost: learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX),
+    })
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
 }
 
 /// One frame on the socket: `seq`, then `N` metas and `N × H × W` cells.
