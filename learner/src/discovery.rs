@@ -229,10 +229,71 @@ enum Phase {
 
 struct Walker {
     phase: Phase,
-    /// Actions since the last reset (the path from the start).
-    prefix: Vec<u8>,
+    /// The way from the start to the agent's pose, loops erased.
+    route: LoopErasedRoute,
+    /// The action whose outcome the next observation shows (`None` after a
+    /// reset).
+    pending: Option<u8>,
+    /// The walk started with a replay whose trajectory is not emitted yet.
+    replayed: bool,
     states: Vec<AgentPose>,
     actions: Vec<u8>,
+}
+
+/// The actions since the last reset with every loop erased: whenever the
+/// agent comes back to a pose (cell and facing) it had, the actions in
+/// between are dropped. In a maze with deterministic dynamics the result
+/// still leads from the start to the same pose, and it is never longer
+/// than what was walked, so recorded paths approach the agent's shortest
+/// known routes (its own experience: no map is consulted). Their replays
+/// are goal-directed trajectories, which the latent model needs: uniformly
+/// random actions are unpredictable between any kept states, so on them
+/// alone it learns to keep none.
+#[derive(Debug, Default)]
+struct LoopErasedRoute {
+    poses: Vec<AgentPose>,
+    actions: Vec<u8>,
+    index: std::collections::HashMap<AgentPose, usize>,
+}
+
+impl LoopErasedRoute {
+    fn reset(&mut self, start: AgentPose) {
+        self.poses.clear();
+        self.actions.clear();
+        self.index.clear();
+        self.poses.push(start);
+        self.index.insert(start, 0);
+    }
+
+    fn clear(&mut self) {
+        self.poses.clear();
+        self.actions.clear();
+        self.index.clear();
+    }
+
+    /// `action` led to `pose`.
+    fn push(&mut self, action: u8, pose: AgentPose) {
+        if self.poses.is_empty() {
+            return; // not started since the last episode end
+        }
+        if let Some(&i) = self.index.get(&pose) {
+            for p in self.poses.drain(i + 1..) {
+                self.index.remove(&p);
+            }
+            self.actions.truncate(i);
+        } else {
+            self.actions.push(action);
+            self.poses.push(pose);
+            self.index.insert(pose, self.poses.len() - 1);
+        }
+    }
+
+    fn trajectory(&self) -> Trajectory {
+        Trajectory {
+            states: self.poses.clone(),
+            actions: self.actions.clone(),
+        }
+    }
 }
 
 /// RNG stream of the final evaluation (far from any round's index).
@@ -362,7 +423,9 @@ impl Discovery {
         let mut walkers: Vec<Walker> = (0..n)
             .map(|_| Walker {
                 phase: Phase::NeedReset,
-                prefix: Vec::new(),
+                route: LoopErasedRoute::default(),
+                pending: None,
+                replayed: false,
                 states: Vec::new(),
                 actions: Vec::new(),
             })
@@ -379,7 +442,14 @@ impl Discovery {
                 // and the last action's outcome is lost.
                 let ended = m.flags & flags::DONE != 0;
                 if ended {
-                    w.prefix.clear();
+                    w.route.clear();
+                    w.pending = None;
+                    w.replayed = false;
+                } else {
+                    match w.pending.take() {
+                        None => w.route.reset(pose),
+                        Some(a) => w.route.push(a, pose),
+                    }
                 }
                 let awaiting_outcome = !w.actions.is_empty() && w.states.len() == w.actions.len();
                 if awaiting_outcome {
@@ -400,21 +470,25 @@ impl Discovery {
                         .paths
                         .get(&pose.cell)
                         .map_or(usize::MAX, Vec::len);
-                    if w.prefix.len() < known {
-                        self.state.paths.insert(pose.cell, w.prefix.clone());
+                    if w.route.actions.len() < known && !w.route.poses.is_empty() {
+                        self.state.paths.insert(pose.cell, w.route.actions.clone());
                     }
                 }
                 actions[i] = match &mut w.phase {
                     Phase::NeedReset => {
-                        w.prefix.clear();
+                        w.route.clear();
+                        w.pending = None;
                         let pivot = (!self.state.pivotal.is_empty()
                             && rng.random_bool(cfg.from_pivotal))
                         .then(|| self.state.pivotal[rng.random_range(0..self.state.pivotal.len())]);
                         w.phase = match pivot.and_then(|p| self.state.paths.get(&p)) {
-                            Some(path) if !path.is_empty() => Phase::Replay {
-                                path: path.clone(),
-                                next: 0,
-                            },
+                            Some(path) if !path.is_empty() => {
+                                w.replayed = true;
+                                Phase::Replay {
+                                    path: path.clone(),
+                                    next: 0,
+                                }
+                            }
                             _ => Phase::Walk { left: cfg.walk_len },
                         };
                         action::RESET
@@ -425,7 +499,7 @@ impl Discovery {
                         if *next == path.len() {
                             w.phase = Phase::Walk { left: cfg.walk_len };
                         }
-                        w.prefix.push(a);
+                        w.pending = Some(a);
                         a
                     }
                     Phase::Walk { left } => {
@@ -433,9 +507,14 @@ impl Discovery {
                             w.states.clear();
                             w.states.push(pose);
                         }
+                        // The replay just ended here: its (loop-erased,
+                        // goal-directed) trajectory is training data too.
+                        if std::mem::take(&mut w.replayed) && w.route.actions.len() >= 2 {
+                            out.push(w.route.trajectory());
+                        }
                         let a = rng.random_range(0..num_actions);
                         w.actions.push(a);
-                        w.prefix.push(a);
+                        w.pending = Some(a);
                         *left -= 1;
                         a
                     }
