@@ -84,7 +84,10 @@ impl Default for DiscoveryConfig {
             latent_steps_per_round: 40,
             latent_batch: 64,
             buffer: 4096,
-            gcp_iters_per_round: 8,
+            // π_g needs hundreds of A2C updates before it reaches goals
+            // (measured alone: ~500 on the small maze, ~700 on the medium);
+            // at 8 per round it never did within the loop's 6–11 rounds.
+            gcp_iters_per_round: 100,
             pivotal_ratio: 0.2,
             latent: LatentConfig::default(),
             gcp: GcpConfig::default(),

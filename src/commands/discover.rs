@@ -42,13 +42,13 @@ pub struct DiscoverArgs {
     /// Environments stepped in parallel.
     #[arg(long, default_value_t = 32)]
     pub envs: usize,
-    /// Most rounds of the loop (the budget).
+    /// Most rounds of the loop (the budget) [default: 30, or the --config file's].
     #[arg(long)]
     pub rounds: Option<u32>,
-    /// Rounds without accuracy improvement before stopping.
+    /// Rounds without accuracy improvement before stopping [default: 4, or the --config file's].
     #[arg(long)]
     pub patience: Option<u32>,
-    /// `π_g` A2C iterations per round (0: random walks only).
+    /// `π_g` A2C iterations per round (0: random walks only) [default: 100, or the --config file's].
     #[arg(long)]
     pub gcp_iters: Option<u32>,
     /// A JSON file of discovery settings (any subset of `DiscoveryConfig`).
