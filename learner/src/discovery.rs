@@ -47,6 +47,10 @@ pub struct DiscoveryConfig {
     pub max_rounds: u32,
     /// Rounds without improvement of the reconstruction accuracy before stopping.
     pub patience: u32,
+    /// Rounds before a plateau may stop the loop: `π_g` needs about 1,000
+    /// updates before its goal episodes mean anything, and the accuracy
+    /// plateaus early on random walks alone.
+    pub min_rounds: u32,
     /// Smallest accuracy gain that counts as an improvement.
     pub min_improvement: f64,
     /// Random-walk steps per environment per round.
@@ -77,6 +81,7 @@ impl Default for DiscoveryConfig {
             seed: 0,
             max_rounds: 30,
             patience: 4,
+            min_rounds: 12,
             min_improvement: 0.005,
             walk_steps_per_round: 256,
             walk_len: 24,
@@ -394,7 +399,8 @@ impl Discovery {
     pub fn finished(&self) -> bool {
         let c = &self.state.config;
         self.state.rounds_done >= c.max_rounds
-            || self.state.rounds_without_improvement >= c.patience
+            || (self.state.rounds_done >= c.min_rounds
+                && self.state.rounds_without_improvement >= c.patience)
     }
 
     /// Prior mean of every cell index of the grid (walls included; 0 for

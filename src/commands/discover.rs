@@ -45,7 +45,8 @@ pub struct DiscoverArgs {
     /// Most rounds of the loop (the budget) [default: 30, or the --config file's].
     #[arg(long)]
     pub rounds: Option<u32>,
-    /// Rounds without accuracy improvement before stopping [default: 4, or the --config file's].
+    /// Rounds without accuracy improvement before stopping, once `min_rounds`
+    /// (12) are done [default: 4, or the --config file's].
     #[arg(long)]
     pub patience: Option<u32>,
     /// `π_g` A2C iterations per round (0: random walks only) [default: 100, or the --config file's].
