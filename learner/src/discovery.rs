@@ -15,7 +15,8 @@
 //! The loop stops when the latent model's reconstruction accuracy has not
 //! improved by `min_improvement` for `patience` rounds, or at `max_rounds`.
 //! Then [`Discovery::build_graph`] connects `V_p` into the world graph
-//! (section 3.3) with the planner.
+//! (section 3.3) with the planner, and `π_g` shortens its edge paths
+//! ([`crate::edge_refinement`]).
 //!
 //! Everything runs on a [`BatchEnvironment`], so the loop is the same in
 //! process and over the shared-memory pipeline. Each round starts by
@@ -33,6 +34,7 @@ use serde::{Deserialize, Serialize};
 use sim::{Layout, Object, action, flags};
 
 use crate::batch_env::{BatchEnvironment, EnvError};
+use crate::edge_refinement::{RefinementStats, refine_with_gcp};
 use crate::error::LearnerError;
 use crate::gcp::{GcpConfig, GcpStats, GoalConditionedPolicy};
 use crate::vae::{AgentPose, LatentConfig, LatentTrainer, Trajectory, TrajectoryBatch};
@@ -717,17 +719,40 @@ impl Discovery {
     }
 
     /// Step 6: the world graph over `V_p` (section 3.3): edges from random
-    /// walks between pivotal states, each kept path shortened by an exact
-    /// search (standing in for `π_g`'s shortening), weights = action counts.
-    pub fn build_graph(&self, task: sim::Task) -> Result<planner::WorldGraph, LearnerError> {
+    /// walks between pivotal states, weights = action counts, then each
+    /// path refined by `π_g` where it reaches the next node faster
+    /// ([`Self::refine_graph`]).
+    pub fn build_graph(
+        &mut self,
+        task: sim::Task,
+    ) -> Result<(planner::WorldGraph, RefinementStats), LearnerError> {
         let nodes = planner::pivotal::nodes_from_cells(&self.layout, &self.state.pivotal);
-        let cfg = planner::PlannerConfig {
+        let mut graph = planner::WorldGraph::build(&self.layout, &self.graph_config(task), &nodes)?;
+        let stats = self.refine_graph(&mut graph)?;
+        Ok((graph, stats))
+    }
+
+    /// The planner settings of [`Self::build_graph`]: the pivotal states as
+    /// the nodes, the run's seed for the walks, and the walks' paths kept
+    /// as found (`shorten` off): shortening is `π_g`'s job here. A planner
+    /// process given the same nodes and settings builds the same graph.
+    pub fn graph_config(&self, task: sim::Task) -> planner::PlannerConfig {
+        planner::PlannerConfig {
             candidates: planner::CandidateSet::Given,
             seed: self.state.config.seed,
             task,
+            shorten: false,
             ..planner::PlannerConfig::default()
-        };
-        Ok(planner::WorldGraph::build(&self.layout, &cfg, &nodes)?)
+        }
+    }
+
+    /// Refines the edge paths of `graph` by following `π_g` along them
+    /// ([`crate::edge_refinement`]).
+    pub fn refine_graph(
+        &mut self,
+        graph: &mut planner::WorldGraph,
+    ) -> Result<RefinementStats, LearnerError> {
+        refine_with_gcp(graph, &mut self.gcp)
     }
 }
 

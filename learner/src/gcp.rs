@@ -647,6 +647,33 @@ impl GoalConditionedPolicy {
         crate::seeding::sample_categorical(&mut self.action_rng, &probs, greedy)
     }
 
+    /// One greedy step of `π_g` on any batch of observations of this
+    /// policy's grid (its size need not be the training batch's): the
+    /// argmax action of every environment towards its goal cell, and the
+    /// next LSTM state. Start from [`ActorCritic::zero_state`], as a goal
+    /// episode does. Used to follow `π_g` along world-graph edges
+    /// ([`crate::edge_refinement`]).
+    pub fn greedy_step(
+        &mut self,
+        obs: &ObsView<'_>,
+        goals: &[u32],
+        state: &LstmState,
+    ) -> Result<(Vec<u8>, LstmState), GcpError> {
+        if obs.width != self.width || obs.height != self.height || goals.len() != obs.num_envs() {
+            return Err(GcpError::ShapeMismatch {
+                expected_envs: goals.len(),
+                expected_width: self.width,
+                expected_height: self.height,
+                envs: obs.num_envs(),
+                width: obs.width,
+                height: obs.height,
+            });
+        }
+        let out = tch::no_grad(|| self.net.forward(&encode_obs(obs, Some(goals)), state));
+        let actions = self.choose_actions(&out.logits, true);
+        Ok((actions, out.state))
+    }
+
     /// One A2C update of `π_g` from a rollout of [`GcpConfig::rollout_len`]
     /// steps on `env` (section 3.2; A2C as in section 4.1).
     ///

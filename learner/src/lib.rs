@@ -14,6 +14,7 @@
 pub mod actor_critic;
 pub mod batch_env;
 pub mod discovery;
+pub mod edge_refinement;
 pub mod error;
 pub mod gae;
 pub mod gcp;

@@ -145,6 +145,11 @@ impl EdgeWorld {
         }
     }
 
+    /// The simulator in the layout's initial world.
+    pub fn template(&self) -> &Env {
+        &self.template
+    }
+
     /// The layout.
     pub fn layout(&self) -> &Layout {
         self.template.layout()
@@ -531,6 +536,49 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
         head += 1;
     }
     found
+}
+
+/// `edge`'s path with its loops cut out, as the walks cut theirs while
+/// they grow (module docs): replayed in the simulator from `from`'s cell
+/// facing `start_dir` in the initial world, every return to a (pose, world)
+/// state the path already passed drops the actions in between. The result
+/// takes the same states in the same order minus the loops, so it is never
+/// longer and ends where `edge` ends; its `cells` are the replay's. Used on
+/// paths followed by a learned policy, which may turn back and forth.
+pub fn loop_erase(world: &EdgeWorld, edge: &EdgePath) -> EdgePath {
+    let width = world.layout().width;
+    let mut env = world.template.clone();
+    let start = world.nodes[edge.from.index()];
+    env.teleport(start.pose(width, edge.start_dir));
+    let mut hash = world.initial_hash();
+    let mut states = vec![(start.0 * 4 + u32::from(edge.start_dir & 3), hash)];
+    let mut index: std::collections::HashMap<(u32, u64), usize> =
+        states.iter().map(|&s| (s, 0)).collect();
+    let (mut actions, mut cells) = (Vec::new(), Vec::new());
+    for &a in &edge.actions {
+        let (meta, h) = world.step(&mut env, a, hash);
+        hash = h;
+        let state = (world.pose_id(&meta), hash);
+        if let Some(&j) = index.get(&state) {
+            for s in states.drain(j + 1..) {
+                index.remove(&s);
+            }
+            actions.truncate(j);
+            cells.truncate(j);
+        } else {
+            index.insert(state, states.len());
+            states.push(state);
+            actions.push(a);
+            cells.push(CellIdx(state.0 / 4));
+        }
+    }
+    EdgePath {
+        from: edge.from,
+        to: edge.to,
+        start_dir: edge.start_dir,
+        actions,
+        cells,
+    }
 }
 
 /// Replays `edge`'s path in the simulator from `from`'s cell facing

@@ -9,8 +9,10 @@
 //!    `V_all` (every cell), `V_rand` (random cells), a list from a file.
 //! 2. **Edges** ([`edges`]): random walks in the simulator from each node;
 //!    `s_p → s_q` when a walk reaches `s_q` without touching a third node;
-//!    the shortest such path is kept (and shortened by an exact search),
-//!    its action count is the edge weight. Doors, keys and one-way effects
+//!    the shortest such path is kept, its action count is the edge weight.
+//!    Paths are then refined: by `π_g` through [`WorldGraph::refine_edges`]
+//!    (the learner's `edge_refinement`, with [`edges::loop_erase`]), or,
+//!    without a learned policy, by an exact search ([`edges::shorten_edge`]). Doors, keys and one-way effects
 //!    are the simulator's own.
 //! 3. **Traversal** ([`shortest_path`], [`world_graph`]): all-pairs
 //!    shortest paths by dynamic programming (Floyd–Warshall with a

@@ -36,7 +36,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use sim::render::{Canvas, Rgb, draw_grid};
-use sim::{Layout, Object, Pose, action};
+use sim::{Env, Layout, Object, Pose, action};
 
 use crate::config::PlannerConfig;
 use crate::edges::{EdgePath, EdgeWorld, check_edge_path, discover_edges};
@@ -323,6 +323,26 @@ impl WorldGraph {
             self.flat_actions.extend_from_slice(&e.actions);
             self.flat_cells.extend_from_slice(&e.cells);
         }
+    }
+
+    /// The simulator the edges are walked in, in the layout's initial world
+    /// (no step limit, no auto-reset, only the layout's balls): start a
+    /// clone of it at a node with [`Env::teleport`] to follow a candidate
+    /// edge path, e.g. `π_g`'s ([`Self::refine_edges`]).
+    pub fn walk_env(&self) -> &Env {
+        self.world.template()
+    }
+
+    /// `edge`'s path with its loops cut out ([`crate::edges::loop_erase`]).
+    pub fn loop_erased(&self, edge: &EdgePath) -> EdgePath {
+        crate::edges::loop_erase(&self.world, edge)
+    }
+
+    /// The length of the shortest path `from → to` that touches no third
+    /// node ([`crate::edges::shortest_edge_path`]), `None` when there is
+    /// none: the floor any refinement of that edge can reach.
+    pub fn shortest_edge_weight(&self, from: NodeId, to: NodeId) -> Option<u32> {
+        crate::edges::shortest_edge_path(&self.world, from, to).map(|p| p.weight())
     }
 
     /// The layout.
@@ -1322,6 +1342,39 @@ mod tests {
                     dijkstra(&g, NodeId(a))[b as usize]
                 );
             }
+        }
+    }
+
+    #[test]
+    fn loop_erasure_cuts_detours_and_keeps_paths_valid() {
+        let layout = Maze::Small.layout(true);
+        let g = WorldGraph::build(&layout, &cfg(CandidateSet::Random { k: 10 }, 5), &[])
+            .expect("graph");
+        for e in g.edges() {
+            // A hesitating follower: turns on the spot before every forward
+            // move, and a full turn at the start.
+            let mut actions = vec![action::LEFT; 4];
+            let mut cells = vec![g.nodes()[e.from.index()]; 4];
+            let mut here = g.nodes()[e.from.index()];
+            for (&a, &c) in e.actions.iter().zip(&e.cells) {
+                if a == action::FORWARD {
+                    actions.extend([action::LEFT, action::RIGHT]);
+                    cells.extend([here, here]);
+                }
+                actions.push(a);
+                cells.push(c);
+                here = c;
+            }
+            let detour = EdgePath {
+                actions,
+                cells,
+                ..e.clone()
+            };
+            check_edge_path(&g.world, &detour).expect("the detour is a valid path");
+            // The edges are exact shortest paths, so erasing the loops gives
+            // back exactly the edge.
+            assert_eq!(&g.loop_erased(&detour), e);
+            assert_eq!(&g.loop_erased(e), e, "a path without loops is kept");
         }
     }
 

@@ -453,6 +453,16 @@ impl Env {
         cells.copy_from_slice(&self.grid);
     }
 
+    /// Writes the current observation (grid and agent) without stepping:
+    /// after [`Env::teleport`], the first observation of a rollout that
+    /// starts at a chosen pose. The step fields of `meta` (reward, flags,
+    /// episode figures) are cleared.
+    pub fn observe(&self, cells: &mut [u8], meta: &mut EnvMeta) {
+        *meta = EnvMeta::EMPTY;
+        self.write_agent(meta);
+        cells.copy_from_slice(&self.grid);
+    }
+
     /// Takes one action and returns the step record without copying the
     /// grid out (read it with [`Env::grid`]). For traces and walks.
     pub fn step_meta(&mut self, action: u8) -> EnvMeta {

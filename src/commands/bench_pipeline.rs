@@ -250,6 +250,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
             walks_per_node: 64,
             walk_len: 64,
             graph_seed: None,
+            no_shorten: false,
         },
         run: RunArgs {
             run: run.clone(),

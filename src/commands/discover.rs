@@ -99,6 +99,16 @@ pub struct DiscoverySummary {
     pub wall_seconds: f64,
     /// Training throughput: env-steps per second of the loop.
     pub train_steps_per_sec: f64,
+    /// Edges whose random-walk path is longer than the shortest possible.
+    pub edges_improvable: usize,
+    /// Edges whose random-walk path `π_g` shortened (section 3.3).
+    pub edges_refined_by_gcp: usize,
+    /// Sum of the edge weights as the random walks found them.
+    pub edge_weight_walks: u64,
+    /// Sum of the edge weights after `π_g`'s refinement (the graph's).
+    pub edge_weight_refined: u64,
+    /// Sum of the exact shortest edge weights (the floor of any refinement).
+    pub edge_weight_shortest: u64,
     /// The pivotal cells, most pivotal first.
     pub pivotal_cells: Vec<[u16; 2]>,
 }
@@ -237,14 +247,17 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         })
         .collect();
     sim::render::write_atomic(&pivotal_file, &serde_json::to_vec(&cells)?)?;
-    let graph = if a.pipeline {
-        build_graph_in_planner(&a, &w, &dir, &pivotal_file)?
+    // Edges from random walks (built here, or by the planner process), then
+    // each path shortened by π_g where it reaches the next node faster.
+    let (graph, refinement) = if a.pipeline {
+        let mut g = build_graph_in_planner(&a, &w, &dir, &pivotal_file)?;
+        let stats = disc.refine_graph(&mut g)?;
+        (g, stats)
     } else {
-        let g = disc.build_graph(Task::MultiGoal)?;
-        g.save(&dir.join("graph.json"))?;
-        g.save_png(&dir.join("graph.png"), 24)?;
-        g
+        disc.build_graph(Task::MultiGoal)?
     };
+    graph.save(&dir.join("graph.json"))?;
+    graph.save_png(&dir.join("graph.png"), 24)?;
 
     let history = disc.history().to_vec();
     let env_steps: u64 = history.iter().map(|h| h.env_steps).sum();
@@ -283,6 +296,11 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         env_steps,
         wall_seconds: loop_seconds,
         train_steps_per_sec: env_steps as f64 / loop_seconds.max(1e-9),
+        edges_improvable: refinement.improvable,
+        edges_refined_by_gcp: refinement.refined,
+        edge_weight_walks: refinement.weight_walks,
+        edge_weight_refined: refinement.weight_refined,
+        edge_weight_shortest: refinement.weight_shortest,
         pivotal_cells: cells,
     };
     sim::render::write_atomic(
@@ -327,6 +345,8 @@ fn build_graph_in_planner(
         "1".into(),
         "--node-file".into(),
         nodes.display().to_string(),
+        // The learner shortens the edges with π_g afterwards.
+        "--no-shorten".into(),
     ]);
     words.extend(["--duration".into(), "0.5".into()]);
     let mut p = Pipeline::new(vec![(Role::Planner, words)], Some(dir))?;
@@ -430,6 +450,17 @@ fn print_summary(s: &DiscoverySummary, dir: &Path) {
         ("rounds", s.rounds.to_string()),
         ("pivotal states |V_p|", s.pivotal_states.to_string()),
         ("world graph edges", s.edges.to_string()),
+        (
+            "  shortened by pi_g / could be shorter",
+            format!("{} / {}", s.edges_refined_by_gcp, s.edges_improvable),
+        ),
+        (
+            "  total weight: walks -> pi_g (shortest)",
+            format!(
+                "{} -> {} ({})",
+                s.edge_weight_walks, s.edge_weight_refined, s.edge_weight_shortest
+            ),
+        ),
         (
             "connected node pairs",
             format!("{:.1}%", 100.0 * s.connected_pairs),

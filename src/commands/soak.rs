@@ -149,6 +149,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             walks_per_node: 128,
             walk_len: 64,
             graph_seed: None,
+            no_shorten: false,
         },
         run: RunArgs {
             run: run.clone(),

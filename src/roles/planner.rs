@@ -51,6 +51,11 @@ pub struct GraphArgs {
     /// Seed of V_rand and of the walks (default: the world seed).
     #[arg(long)]
     pub graph_seed: Option<u64>,
+    /// Keep the random walks' edge paths as found instead of shortening
+    /// each by an exact search (`discover` shortens them with π_g instead,
+    /// as the paper does).
+    #[arg(long)]
+    pub no_shorten: bool,
 }
 
 impl GraphArgs {
@@ -66,7 +71,7 @@ impl GraphArgs {
             seed: self.graph_seed.unwrap_or(world.seed),
             walks_per_node: self.walks_per_node,
             walk_len: self.walk_len,
-            shorten: true,
+            shorten: !self.no_shorten,
             task: world.task,
             ..PlannerConfig::default()
         }
