@@ -219,3 +219,25 @@ fn bench_sim_json_has_the_documented_fields() {
     }
     assert_eq!(r["obs_bytes_per_step"], 13 * 13 + 20);
 }
+
+#[test]
+fn a_role_pinned_to_a_cpu_it_may_not_use_is_refused_before_opening_anything() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let out = worldgraph(&[
+        "sim",
+        "serve",
+        "--run",
+        "wgtest_cpu",
+        "--run-dir",
+        run_dir.to_str().unwrap(),
+        "--cpu",
+        "4095",
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--cpu 4095") && stderr.contains("may only run on CPUs"),
+        "{stderr}"
+    );
+}

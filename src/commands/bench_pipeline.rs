@@ -257,6 +257,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
             run_dir: Some(dir.path().to_path_buf()),
             on_peer_death: OnPeerDeath::Exit,
             duration: None,
+            cpu: None,
         },
         envs: a.envs,
         slices: a.slices,
@@ -264,6 +265,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
         policy: PolicyKind::Random,
         route_every: 0,
         logs_to_files: true,
+        pin: false,
     };
     let mut p = args.pipeline()?;
     p.start_all()?;

@@ -156,6 +156,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             run_dir: Some(dir.clone()),
             on_peer_death: OnPeerDeath::Wait,
             duration: None,
+            cpu: None,
         },
         envs: a.envs,
         slices: a.slices,
@@ -163,6 +164,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         policy: PolicyKind::Random,
         route_every: a.route_every,
         logs_to_files: true,
+        pin: false,
     };
     let stop = stop_flag()?;
     let mut p = args.pipeline()?;

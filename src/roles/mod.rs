@@ -70,6 +70,39 @@ pub struct RunArgs {
     /// Stop after this many seconds (default: run until Ctrl-C / SIGTERM).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Pin this process to one CPU (its id as the kernel numbers them), e.g.
+    /// to keep the busy-polling sim and learner on separate cores of a
+    /// larger machine (`run --pin` does it for both).
+    #[arg(long)]
+    pub cpu: Option<usize>,
+}
+
+/// The CPUs this process may run on, in the kernel's numbering.
+pub fn allowed_cpus() -> Vec<usize> {
+    use nix::sched::{CpuSet, sched_getaffinity};
+    use nix::unistd::Pid;
+    match sched_getaffinity(Pid::from_raw(0)) {
+        Ok(set) => (0..CpuSet::count())
+            .filter(|&c| set.is_set(c).unwrap_or(false))
+            .collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
+/// Pins the calling process (its current thread, and every thread it
+/// starts afterwards) to `cpu`.
+pub fn pin_to_cpu(cpu: usize) -> anyhow::Result<()> {
+    use nix::sched::{CpuSet, sched_setaffinity};
+    use nix::unistd::Pid;
+    let allowed = allowed_cpus();
+    anyhow::ensure!(
+        allowed.contains(&cpu),
+        "--cpu {cpu}: this process may only run on CPUs {allowed:?}"
+    );
+    let mut set = CpuSet::new();
+    set.set(cpu)
+        .with_context(|| format!("--cpu {cpu}: no such CPU"))?;
+    sched_setaffinity(Pid::from_raw(0), &set).with_context(|| format!("cannot pin to CPU {cpu}"))
 }
 
 /// The resolved identity of a role's run.
@@ -114,6 +147,9 @@ impl RunCtx {
         let deadline = a
             .duration
             .map(|d| Instant::now() + Duration::from_secs_f64(d));
+        if let Some(cpu) = a.cpu {
+            pin_to_cpu(cpu)?;
+        }
         Ok(RunCtx {
             run,
             config,
