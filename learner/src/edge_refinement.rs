@@ -75,7 +75,11 @@ pub fn refine_with_gcp(
     let shortest: Vec<u32> = graph
         .edges()
         .iter()
-        .map(|e| graph.shortest_edge_weight(e.from, e.to).unwrap_or(e.weight()))
+        .map(|e| {
+            graph
+                .shortest_edge_weight(e.from, e.to)
+                .unwrap_or(e.weight())
+        })
         .collect();
     let mut stats = RefinementStats {
         edges: graph.edges().len(),

@@ -12,8 +12,8 @@ use std::time::Instant;
 use learner::batch_env::InProcess;
 use learner::edge_refinement::{RefinementStats, refine_with_gcp};
 use learner::gcp::{GcpConfig, GoalConditionedPolicy};
-use planner::{CandidateSet, CellIdx, PlannerConfig, WorldGraph};
 use learner::vae::{LatentConfig, LatentTrainer, TrajectoryBatch};
+use planner::{CandidateSet, CellIdx, PlannerConfig, WorldGraph};
 use sim::{AutoReset, BallSpawn, EnvConfig, Layout, Task};
 
 /// A room with the exit in a corner (every layout needs one).

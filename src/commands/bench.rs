@@ -254,11 +254,7 @@ pub fn print_sim_report(r: &SimBenchReport) {
     println!(
         "  {:<34} {:>17}",
         "  range over the 5 windows",
-        format!(
-            "{:.1}–{:.1}%",
-            r.ratio_min * 100.0,
-            r.ratio_max * 100.0
-        )
+        format!("{:.1}–{:.1}%", r.ratio_min * 100.0, r.ratio_max * 100.0)
     );
     println!(
         "  {:<34} {:>16.2}M",
