@@ -89,6 +89,9 @@ pub struct PipelineBenchReport {
     pub socket_roundtrip_p99_us: f64,
     /// Batches the learner lost over shared memory (must be 0).
     pub ipc_batches_lost: u64,
+    /// Share of the pipeline sim's time spent waiting for actions instead
+    /// of stepping: near 0 means the sim process is the bottleneck.
+    pub sim_wait_fraction: f64,
 }
 
 /// Runs the benchmark.
@@ -101,6 +104,7 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
         ratio,
         rtt,
         lost,
+        sim_wait,
     } = bench_interleaved(&a)?;
     let (socket, srtt) = bench_socket(&a)?;
     let r = PipelineBenchReport {
@@ -117,6 +121,7 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
         socket_roundtrip_p50_us: srtt.0,
         socket_roundtrip_p99_us: srtt.1,
         ipc_batches_lost: lost,
+        sim_wait_fraction: sim_wait,
     };
     if a.json {
         println!("{}", serde_json::to_string(&r)?);
@@ -155,6 +160,10 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
             r.socket_roundtrip_p50_us, r.socket_roundtrip_p99_us
         );
         println!("  batches lost over shared memory: {}", r.ipc_batches_lost);
+        println!(
+            "  pipeline sim waiting for actions: {:.1} % of its loop (near 0: the sim is the bottleneck)",
+            100.0 * r.sim_wait_fraction
+        );
     }
     Ok(std::process::ExitCode::SUCCESS)
 }
@@ -226,6 +235,7 @@ struct Interleaved {
     ratio: f64,
     rtt: (f64, f64, f64),
     lost: u64,
+    sim_wait: f64,
 }
 
 /// The in-process loop and the three processes over shared memory, measured
@@ -313,6 +323,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
             pct("roundtrip_p999_us"),
         ),
         lost: learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX),
+        sim_wait: pct("wait_fraction"),
     })
 }
 

@@ -86,9 +86,18 @@ pub struct SimReport {
     pub roundtrip_p999_us: f64,
     /// Step p50 (µs).
     pub step_p50_us: f64,
+    /// Share of the loop's time spent waiting for action batches rather
+    /// than stepping (loan + step + send): near 0 when the sim is the
+    /// bottleneck, large when the learner or the transport is. Waits over
+    /// [`LONG_WAIT`] (a paused, dead or restarting learner) are left out.
+    pub wait_fraction: f64,
     /// Why the loop ended.
     pub stopped_by: String,
 }
+
+/// Waits for actions longer than this are a paused or absent learner, not
+/// the pipeline's rhythm ([`SimReport::wait_fraction`]).
+const LONG_WAIT: Duration = Duration::from_millis(1);
 
 /// How often a line is appended to `sim.stats.jsonl`.
 const STATS_EVERY: Duration = Duration::from_millis(250);
@@ -200,6 +209,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         sent_at[k] = Instant::now();
     }
     let mut records = vec![sim::EnvMeta::EMPTY; per_slice];
+    let (mut wait_time, mut step_time) = (Duration::ZERO, Duration::ZERO);
     let mut seq = 0u64;
     let started = sent_at[0];
     let mut last_sent = started;
@@ -256,6 +266,10 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         let now = Instant::now();
         let slice = (seq % k_slices) as usize;
         rtt_interval.record((now - sent_at[slice]).as_nanos() as u64);
+        let waited = now - last_sent;
+        if waited <= LONG_WAIT {
+            wait_time += waited;
+        }
 
         // Step this slice straight into its next loaned sample: the cells in
         // place, the step records through `records` (module docs).
@@ -278,6 +292,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         sent_at[slice] = sent;
         last_sent = sent;
         step_rec.record((sent - now).as_nanos() as u64);
+        step_time += sent - now;
         env_steps += per_slice as u64;
         seq += 1;
 
@@ -333,6 +348,8 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         roundtrip_p99_us: lat.percentile_us("action_round_trip", 99.0),
         roundtrip_p999_us: lat.percentile_us("action_round_trip", 99.9),
         step_p50_us: lat.percentile_us("step", 50.0),
+        wait_fraction: wait_time.as_secs_f64()
+            / (wait_time + step_time).as_secs_f64().max(1e-12),
         stopped_by: stopped_by.clone(),
     };
     ctx.write_json("sim.report.json", &report)?;
