@@ -49,14 +49,16 @@ pub struct DiscoverArgs {
     /// (12) are done [default: 4, or the --config file's].
     #[arg(long)]
     pub patience: Option<u32>,
-    /// `π_g` A2C iterations per round (0: random walks only) [default: 100, or the --config file's].
+    /// `π_g` A2C iterations per round (0: random walks only, and the edges
+    /// keep the walks' paths) [default: 100, or the --config file's].
     #[arg(long)]
     pub gcp_iters: Option<u32>,
     /// A JSON file of discovery settings (any subset of `DiscoveryConfig`).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Run as the pipeline's processes: the environments in a sim process,
-    /// the loop in this (learner) process, the graph built by a planner process.
+    /// the loop in this (learner) process, the graph's edges walked by a
+    /// planner process (and refined by π_g here).
     #[arg(long)]
     pub pipeline: bool,
     /// Print the summary as JSON.
