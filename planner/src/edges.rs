@@ -257,12 +257,15 @@ fn carry_code(env: &Env) -> u8 {
         .map_or(EnvMeta::CARRYING_NOTHING, |o| o as u8)
 }
 
-/// Reusable buffers of one thread's walks.
-struct WalkScratch {
-    env: Env,
-    dirty: bool,
-    /// Loop-erased path: `states[0]` is the start, `actions[i]` leads from
-    /// `states[i]` to `states[i + 1]`, whose cell is `cells[i]`.
+/// A path from a start state that cuts its loops as it grows (module
+/// docs): `states[0]` is the start, `actions[i]` leads from `states[i]` to
+/// `states[i + 1]`, whose cell is `cells[i]`; a state is `(pose id, world
+/// hash)`. When a pushed state is one the path already holds, the loop
+/// back to it is dropped. Only the latest state of each pose is looked up,
+/// which finds every loop when the world changes one way only (the walks);
+/// a path that undoes a change (closes a door it opened) keeps that loop,
+/// which leaves it valid, only longer.
+struct LoopErasedPath {
     states: Vec<(u32, u64)>,
     actions: Vec<u8>,
     cells: Vec<CellIdx>,
@@ -271,15 +274,56 @@ struct WalkScratch {
     slot: Vec<u32>,
 }
 
+impl LoopErasedPath {
+    fn new(world: &EdgeWorld) -> LoopErasedPath {
+        LoopErasedPath {
+            states: Vec::new(),
+            actions: Vec::new(),
+            cells: Vec::new(),
+            slot: vec![u32::MAX; world.layout().cells.len() * 4],
+        }
+    }
+
+    /// Starts over at `start`.
+    fn start(&mut self, start: (u32, u64)) {
+        self.states.clear();
+        self.actions.clear();
+        self.cells.clear();
+        self.slot[start.0 as usize] = 0;
+        self.states.push(start);
+    }
+
+    /// `a` led to `state`.
+    fn push(&mut self, a: u8, state: (u32, u64)) {
+        let j = self.slot[state.0 as usize] as usize;
+        if j < self.states.len() && self.states[j] == state {
+            // Back to a state the path already passed: erase the loop.
+            self.states.truncate(j + 1);
+            self.actions.truncate(j);
+            self.cells.truncate(j);
+        } else {
+            self.slot[state.0 as usize] = self.states.len() as u32;
+            self.states.push(state);
+            self.actions.push(a);
+            self.cells.push(CellIdx(state.0 / 4));
+        }
+    }
+}
+
+/// Reusable buffers of one thread's walks.
+struct WalkScratch {
+    env: Env,
+    dirty: bool,
+    /// The current walk's loop-erased path.
+    path: LoopErasedPath,
+}
+
 impl WalkScratch {
     fn new(world: &EdgeWorld) -> WalkScratch {
         WalkScratch {
             env: world.template.clone(),
             dirty: false,
-            states: Vec::new(),
-            actions: Vec::new(),
-            cells: Vec::new(),
-            slot: vec![u32::MAX; world.layout().cells.len() * 4],
+            path: LoopErasedPath::new(world),
         }
     }
 }
@@ -302,12 +346,8 @@ fn walk(
     let width = world.layout().width;
     s.env.teleport(world.nodes[p.index()].pose(width, dir));
     let mut hash = h0;
-    s.states.clear();
-    s.actions.clear();
-    s.cells.clear();
-    let start = (world.nodes[p.index()].0 * 4 + dir as u32, h0);
-    s.slot[start.0 as usize] = 0;
-    s.states.push(start);
+    s.path
+        .start((world.nodes[p.index()].0 * 4 + dir as u32, h0));
     let mut choices = [0u8; 5];
     for _ in 0..len {
         let n = world.effective_actions(&s.env, &mut choices);
@@ -319,18 +359,7 @@ fn walk(
         }
         let state = (world.pose_id(&meta), hash);
         let cell = CellIdx(state.0 / 4);
-        let j = s.slot[state.0 as usize] as usize;
-        if j < s.states.len() && s.states[j] == state {
-            // Back to a state the path already passed: erase the loop.
-            s.states.truncate(j + 1);
-            s.actions.truncate(j);
-            s.cells.truncate(j);
-        } else {
-            s.slot[state.0 as usize] = s.states.len() as u32;
-            s.states.push(state);
-            s.actions.push(a);
-            s.cells.push(cell);
-        }
+        s.path.push(a, state);
         if let Some(q) = world.node_at(cell).filter(|&q| q != p) {
             return Some(q);
         }
@@ -378,18 +407,18 @@ pub fn discover_edges(world: &EdgeWorld, cfg: &PlannerConfig) -> Vec<EdgePath> {
                         continue;
                     };
                     match best.iter_mut().find(|e| e.to == q) {
-                        Some(e) if e.actions.len() <= s.actions.len() => {}
+                        Some(e) if e.actions.len() <= s.path.actions.len() => {}
                         Some(e) => {
                             e.start_dir = dir;
-                            e.actions.clone_from(&s.actions);
-                            e.cells.clone_from(&s.cells);
+                            e.actions.clone_from(&s.path.actions);
+                            e.cells.clone_from(&s.path.cells);
                         }
                         None => best.push(EdgePath {
                             from: p,
                             to: q,
                             start_dir: dir,
-                            actions: s.actions.clone(),
-                            cells: s.cells.clone(),
+                            actions: s.path.actions.clone(),
+                            cells: s.path.cells.clone(),
                         }),
                     }
                 }
@@ -544,40 +573,26 @@ fn bfs_edges(world: &EdgeWorld, from: NodeId, target: Option<NodeId>) -> Vec<Edg
 /// state the path already passed drops the actions in between. The result
 /// takes the same states in the same order minus the loops, so it is never
 /// longer and ends where `edge` ends; its `cells` are the replay's. Used on
-/// paths followed by a learned policy, which may turn back and forth.
+/// paths followed by a learned policy, which may turn back and forth. The
+/// erasure is the walks' own (`LoopErasedPath`).
 pub fn loop_erase(world: &EdgeWorld, edge: &EdgePath) -> EdgePath {
-    let width = world.layout().width;
-    let mut env = world.template.clone();
     let start = world.nodes[edge.from.index()];
-    env.teleport(start.pose(width, edge.start_dir));
+    let mut env = world.template.clone();
+    env.teleport(start.pose(world.layout().width, edge.start_dir));
     let mut hash = world.initial_hash();
-    let mut states = vec![(start.0 * 4 + u32::from(edge.start_dir & 3), hash)];
-    let mut index: std::collections::HashMap<(u32, u64), usize> =
-        states.iter().map(|&s| (s, 0)).collect();
-    let (mut actions, mut cells) = (Vec::new(), Vec::new());
+    let mut path = LoopErasedPath::new(world);
+    path.start((start.0 * 4 + u32::from(edge.start_dir & 3), hash));
     for &a in &edge.actions {
         let (meta, h) = world.step(&mut env, a, hash);
         hash = h;
-        let state = (world.pose_id(&meta), hash);
-        if let Some(&j) = index.get(&state) {
-            for s in states.drain(j + 1..) {
-                index.remove(&s);
-            }
-            actions.truncate(j);
-            cells.truncate(j);
-        } else {
-            index.insert(state, states.len());
-            states.push(state);
-            actions.push(a);
-            cells.push(CellIdx(state.0 / 4));
-        }
+        path.push(a, (world.pose_id(&meta), hash));
     }
     EdgePath {
         from: edge.from,
         to: edge.to,
         start_dir: edge.start_dir,
-        actions,
-        cells,
+        actions: path.actions,
+        cells: path.cells,
     }
 }
 

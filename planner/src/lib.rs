@@ -12,8 +12,9 @@
 //!    the shortest such path is kept, its action count is the edge weight.
 //!    Paths are then refined: by `π_g` through [`WorldGraph::refine_edges`]
 //!    (the learner's `edge_refinement`, with [`edges::loop_erase`]), or,
-//!    without a learned policy, by an exact search ([`edges::shorten_edge`]). Doors, keys and one-way effects
-//!    are the simulator's own.
+//!    without a learned policy, by an exact search
+//!    ([`edges::shorten_edge`]). Doors, keys and one-way effects are the
+//!    simulator's own.
 //! 3. **Traversal** ([`shortest_path`], [`world_graph`]): all-pairs
 //!    shortest paths by dynamic programming (Floyd–Warshall with a
 //!    next-hop table) and routes — nodes, cells and executable actions —

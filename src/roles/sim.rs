@@ -348,8 +348,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         roundtrip_p99_us: lat.percentile_us("action_round_trip", 99.0),
         roundtrip_p999_us: lat.percentile_us("action_round_trip", 99.9),
         step_p50_us: lat.percentile_us("step", 50.0),
-        wait_fraction: wait_time.as_secs_f64()
-            / (wait_time + step_time).as_secs_f64().max(1e-12),
+        wait_fraction: wait_time.as_secs_f64() / (wait_time + step_time).as_secs_f64().max(1e-12),
         stopped_by: stopped_by.clone(),
     };
     ctx.write_json("sim.report.json", &report)?;
