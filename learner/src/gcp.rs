@@ -854,12 +854,9 @@ impl GoalConditionedPolicy {
         while counted.iter().any(|&c| c) {
             let chosen = {
                 let obs = env.observe();
-                let out = tch::no_grad(|| {
-                    self.net
-                        .forward(&encode_obs(&obs, Some(&book.goals())), &state)
-                });
-                state = out.state;
-                self.choose_actions(&out.logits, true)
+                let (chosen, next) = self.greedy_step(&obs, &book.goals(), &state)?;
+                state = next;
+                chosen
             };
             env.step(&chosen)?;
             t += 1;
