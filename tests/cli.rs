@@ -221,7 +221,7 @@ fn bench_sim_json_has_the_documented_fields() {
 }
 
 #[test]
-fn a_role_pinned_to_a_cpu_it_may_not_use_is_refused_before_opening_anything() {
+fn a_role_pinned_to_a_cpu_it_may_not_use_is_refused_naming_the_allowed_ones() {
     let dir = tempfile::tempdir().unwrap();
     let run_dir = dir.path().join("run");
     let out = worldgraph(&[
