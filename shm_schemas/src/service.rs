@@ -1354,11 +1354,21 @@ impl<S: Service> ObsSampleMut<S> {
 
     /// Stamps `send_time_ns` and publishes; returns the number of
     /// subscribers reached.
-    pub fn send(mut self) -> Result<usize, ShmError> {
-        self.sample.user_header_mut().send_time_ns = monotonic_ns();
-        self.sample
+    pub fn send(self) -> Result<usize, ShmError> {
+        self.send_stamped().map(|(subscribers, _)| subscribers)
+    }
+
+    /// [`send`](Self::send), also returning the stamped `send_time_ns`
+    /// ([`monotonic_ns`]), so a caller that times its loop needs no second
+    /// clock read.
+    pub fn send_stamped(mut self) -> Result<(usize, u64), ShmError> {
+        let t = monotonic_ns();
+        self.sample.user_header_mut().send_time_ns = t;
+        let subscribers = self
+            .sample
             .send()
-            .map_err(|e| ipc_err("send", Channel::Obs, e))
+            .map_err(|e| ipc_err("send", Channel::Obs, e))?;
+        Ok((subscribers, t))
     }
 }
 

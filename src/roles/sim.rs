@@ -20,19 +20,20 @@
 //! Factory). Each slice is still lock-step with its own actions; the
 //! environments and their trajectories are the same for every `K`.
 //!
-//! Hot-loop histograms: `step` (loaning a sample, stepping one slice's
-//! environments into it and publishing it), `action_round_trip` (publish
-//! of sample k → receipt of action k).
+//! Hot-loop histograms: `step` (loaning a sample and stepping one slice's
+//! environments into it, up to the header's send stamp), `action_round_trip`
+//! (that stamp of sample k → receipt of action k, so it includes the
+//! publish).
 
 use std::io::Write;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::Context;
 use clap::Args;
 use iceoryx2::prelude::ipc;
 use serde::Serialize;
 use shm_schemas::service::PipelineNode;
-use shm_schemas::{Backoff, ObsShape};
+use shm_schemas::{Backoff, ObsShape, monotonic_ns};
 use sim::{BatchEnv, StepOut};
 
 use super::{
@@ -196,26 +197,26 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     // Samples 0..K: every slice's first observations, written in place.
     // `seq` is the oldest sample awaiting its actions; samples seq..seq+K
     // are out, sample k holding slice k mod K; `sent_at[k mod K]` is when
-    // sample k was published.
+    // sample k was published (its header's `send_time_ns`). The loop keeps
+    // time in those nanoseconds: two clock reads per sample.
     let k_slices = a.slices as u64;
-    let mut sent_at = vec![Instant::now(); a.slices];
+    let mut sent_at = vec![0u64; a.slices];
     for (k, batch) in slices.iter_mut().enumerate() {
         let mut sample = publisher.loan(k as u64, 0)?;
         {
             let (_, meta, cells) = sample.batch_mut().into_parts();
             batch.reset(StepOut { cells, meta });
         }
-        sample.send()?;
-        sent_at[k] = Instant::now();
+        sent_at[k] = sample.send_stamped()?.1;
     }
     let mut records = vec![sim::EnvMeta::EMPTY; per_slice];
-    let (mut wait_time, mut step_time) = (Duration::ZERO, Duration::ZERO);
+    let (mut wait_ns, mut step_ns) = (0u64, 0u64);
     let mut seq = 0u64;
     let started = sent_at[0];
     let mut last_sent = started;
     let (mut env_steps, mut episodes, mut stale) = (0u64, 0u64, 0u64);
-    let mut next_stats = started + STATS_EVERY;
-    let mut next_minute = started + Duration::from_secs(60);
+    let mut next_stats = started + STATS_EVERY.as_nanos() as u64;
+    let mut next_minute = started + 60_000_000_000;
     let mut minutes = 0u64;
     let (mut last_stats_seq, mut last_stats_t) = (0u64, started);
     let mut stopped_by = "stop request".to_string();
@@ -263,12 +264,12 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 publisher.update_connections()?;
             }
         };
-        let now = Instant::now();
+        let now = monotonic_ns();
         let slice = (seq % k_slices) as usize;
-        rtt_interval.record((now - sent_at[slice]).as_nanos() as u64);
+        rtt_interval.record(now - sent_at[slice]);
         let waited = now - last_sent;
-        if waited <= LONG_WAIT {
-            wait_time += waited;
+        if waited <= LONG_WAIT.as_nanos() as u64 {
+            wait_ns += waited;
         }
 
         // Step this slice straight into its next loaned sample: the cells in
@@ -285,21 +286,20 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             meta.copy_from_slice(&records);
         }
         drop(act);
-        sample.send()?;
-        // One clock read per sample here (the next sample's round trip
-        // starts now too): loan + step + send is the `step` histogram.
-        let sent = Instant::now();
+        // The header's send stamp is also this loop's clock: loan + step is
+        // the `step` histogram, and this slice's next round trip starts here.
+        let sent = sample.send_stamped()?.1;
         sent_at[slice] = sent;
         last_sent = sent;
-        step_rec.record((sent - now).as_nanos() as u64);
-        step_time += sent - now;
+        step_rec.record(sent - now);
+        step_ns += sent - now;
         env_steps += per_slice as u64;
         seq += 1;
 
         if sent >= next_stats {
-            let dt = (last_sent - last_stats_t).as_secs_f64();
+            let dt = secs(last_sent - last_stats_t);
             let mut line = StatsLine {
-                t: (last_sent - started).as_secs_f64(),
+                t: secs(last_sent - started),
                 unix_ms: std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
                     .map_or(0, |d| d.as_millis() as u64),
@@ -320,12 +320,12 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 line.minute_roundtrip_p99_us = Some(rtt_minute.percentile_us(99.0));
                 rtt_minute.reset();
                 minutes += 1;
-                next_minute += Duration::from_secs(60);
+                next_minute += 60_000_000_000;
             }
             writeln!(stats, "{}", serde_json::to_string(&line)?)?;
             ctx.report_on_request(&lat);
             (last_stats_seq, last_stats_t) = (seq, last_sent);
-            next_stats = last_sent + STATS_EVERY;
+            next_stats = last_sent + STATS_EVERY.as_nanos() as u64;
             if ctx.should_stop() {
                 break;
             }
@@ -335,7 +335,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     fold(&mut lat, &mut step_rec, &rtt_interval);
     drop((actions, publisher, node));
     ctx.tidy();
-    let seconds = (last_sent - started).as_secs_f64().max(1e-9);
+    let seconds = secs(last_sent - started).max(1e-9);
     let report = SimReport {
         batches: seq + k_slices,
         env_steps,
@@ -348,7 +348,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         roundtrip_p99_us: lat.percentile_us("action_round_trip", 99.0),
         roundtrip_p999_us: lat.percentile_us("action_round_trip", 99.9),
         step_p50_us: lat.percentile_us("step", 50.0),
-        wait_fraction: wait_time.as_secs_f64() / (wait_time + step_time).as_secs_f64().max(1e-12),
+        wait_fraction: wait_ns as f64 / ((wait_ns + step_ns) as f64).max(1.0),
         stopped_by: stopped_by.clone(),
     };
     ctx.write_json("sim.report.json", &report)?;
@@ -365,4 +365,9 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     } else {
         std::process::ExitCode::SUCCESS
     })
+}
+
+/// Nanoseconds to seconds.
+fn secs(ns: u64) -> f64 {
+    ns as f64 * 1e-9
 }
