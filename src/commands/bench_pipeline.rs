@@ -14,6 +14,13 @@
 //!
 //! Throughput is env-steps per second; round trips are the sim's publish of
 //! observation `k` → receipt of action `k`.
+//!
+//! Each round also measures the machine's **core-to-core round trip** (two
+//! threads on two CPUs passing one cache line back and forth): every batch
+//! crosses cores several times, so the pipeline's share of the in-process
+//! figure follows it. On a shared VM it is not constant (on the 2-vCPU
+//! machine of the closing notes it moved between ~110 and ~500 ns within
+//! minutes), which is why it is printed next to the ratio.
 
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -92,6 +99,25 @@ pub struct PipelineBenchReport {
     /// Share of the pipeline sim's time spent waiting for actions instead
     /// of stepping: near 0 means the sim process is the bottleneck.
     pub sim_wait_fraction: f64,
+    /// Median over the rounds of the core-to-core round trip (ns); `null`
+    /// with fewer than two CPUs.
+    pub core_to_core_rtt_ns: Option<f64>,
+    /// Each round: in-process and shared-memory env-steps/s, their ratio,
+    /// and the core-to-core round trip measured just before.
+    pub rounds: Vec<BenchRound>,
+}
+
+/// One round of the interleaved measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchRound {
+    /// In-process env-steps/s.
+    pub inprocess_steps_per_sec: f64,
+    /// Shared-memory env-steps/s.
+    pub ipc_steps_per_sec: f64,
+    /// `ipc / inprocess`.
+    pub ratio: f64,
+    /// Core-to-core round trip (ns), if measurable.
+    pub core_to_core_rtt_ns: Option<f64>,
 }
 
 /// Runs the benchmark.
@@ -105,6 +131,7 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
         rtt,
         lost,
         sim_wait,
+        rounds,
     } = bench_interleaved(&a)?;
     let (socket, srtt) = bench_socket(&a)?;
     let r = PipelineBenchReport {
@@ -122,6 +149,14 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
         socket_roundtrip_p99_us: srtt.1,
         ipc_batches_lost: lost,
         sim_wait_fraction: sim_wait,
+        core_to_core_rtt_ns: {
+            let c: Vec<f64> = rounds
+                .iter()
+                .filter_map(|r| r.core_to_core_rtt_ns)
+                .collect();
+            (!c.is_empty()).then(|| median(c))
+        },
+        rounds,
     };
     if a.json {
         println!("{}", serde_json::to_string(&r)?);
@@ -164,6 +199,19 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
             "  pipeline sim waiting for actions: {:.1} % of its loop (near 0: the sim is the bottleneck)",
             100.0 * r.sim_wait_fraction
         );
+        println!("  rounds (in-process, shared memory, ratio, core-to-core round trip):");
+        for (i, round) in r.rounds.iter().enumerate() {
+            println!(
+                "    {}  {:>7.2}M {:>7.2}M {:>6.2}  {}",
+                i + 1,
+                round.inprocess_steps_per_sec / 1e6,
+                round.ipc_steps_per_sec / 1e6,
+                round.ratio,
+                round
+                    .core_to_core_rtt_ns
+                    .map_or("-".to_string(), |ns| format!("{ns:.0} ns"))
+            );
+        }
     }
     Ok(std::process::ExitCode::SUCCESS)
 }
@@ -236,6 +284,7 @@ struct Interleaved {
     rtt: (f64, f64, f64),
     lost: u64,
     sim_wait: f64,
+    rounds: Vec<BenchRound>,
 }
 
 /// The in-process loop and the three processes over shared memory, measured
@@ -279,6 +328,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
     };
     let mut p = args.pipeline()?;
     p.start_all()?;
+    let mut c2c = Vec::new();
     let measured = (|| -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
         // Warm-up: the planner builds its graph, the learner connects.
         let first = next_progress(dir.path(), None)?;
@@ -287,6 +337,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
         let (mut local_rates, mut ipc_rates) = (Vec::new(), Vec::new());
         for _ in 0..ROUNDS {
             p.signal_all(Signal::SIGSTOP);
+            c2c.push(core_to_core_round_trip_ns());
             local_rates.push(local.run_for(window)?);
             p.signal_all(Signal::SIGCONT);
             std::thread::sleep(Duration::from_millis(200));
@@ -313,7 +364,16 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
     let pct = |k: &str| sim[k].as_f64().unwrap_or(f64::NAN);
     let learner: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
+    let rounds = (0..ratios.len())
+        .map(|i| BenchRound {
+            inprocess_steps_per_sec: local_rates[i],
+            ipc_steps_per_sec: ipc_rates[i],
+            ratio: ratios[i],
+            core_to_core_rtt_ns: c2c.get(i).copied().flatten(),
+        })
+        .collect();
     Ok(Interleaved {
+        rounds,
         inprocess: median(local_rates),
         ipc: median(ipc_rates),
         ratio: median(ratios),
@@ -325,6 +385,69 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
         lost: learner["stream"]["lost"].as_u64().unwrap_or(u64::MAX),
         sim_wait: pct("wait_fraction"),
     })
+}
+
+/// Round trip of one cache line between threads pinned to the first two
+/// CPUs this process may use (median of 5 runs of 20,000 exchanges), in ns;
+/// `None` with fewer than two CPUs or when pinning is refused.
+pub fn core_to_core_round_trip_ns() -> Option<f64> {
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+    #[repr(align(128))]
+    struct Line(AtomicU64);
+    const EXCHANGES: u64 = 20_000;
+    let cpus = crate::roles::allowed_cpus();
+    let (&a, &b) = (cpus.first()?, cpus.get(1)?);
+    let (ping, pong) = (Line(AtomicU64::new(0)), Line(AtomicU64::new(0)));
+    let failed = AtomicBool::new(false);
+    // Spins until `line` holds `i`; false if the other thread gave up.
+    let wait_for = |line: &Line, i: u64| {
+        while line.0.load(Ordering::Acquire) != i {
+            if failed.load(Ordering::Relaxed) {
+                return false;
+            }
+            std::hint::spin_loop();
+        }
+        true
+    };
+    let pinned = |cpu: usize| {
+        let ok = crate::roles::pin_to_cpu(cpu).is_ok();
+        if !ok {
+            failed.store(true, Ordering::Relaxed);
+        }
+        ok
+    };
+    let mut runs = Vec::new();
+    for run in 0..5u64 {
+        let exchanges = run * EXCHANGES + 1..=(run + 1) * EXCHANGES;
+        let ns = std::thread::scope(|s| {
+            let echo = s.spawn(|| {
+                pinned(b)
+                    && exchanges.clone().all(|i| {
+                        let seen = wait_for(&ping, i);
+                        pong.0.store(i, Ordering::Release);
+                        seen
+                    })
+            });
+            let lead = s.spawn(|| {
+                if !pinned(a) {
+                    return None;
+                }
+                let t0 = Instant::now();
+                for i in exchanges.clone() {
+                    ping.0.store(i, Ordering::Release);
+                    if !wait_for(&pong, i) {
+                        return None;
+                    }
+                }
+                Some(t0.elapsed().as_nanos() as f64 / EXCHANGES as f64)
+            });
+            let ns = lead.join().ok().flatten();
+            let echoed = echo.join().unwrap_or(false);
+            ns.filter(|_| echoed)
+        });
+        runs.push(ns?);
+    }
+    Some(median(runs))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
