@@ -220,6 +220,66 @@ fn bench_sim_json_has_the_documented_fields() {
     assert_eq!(r["obs_bytes_per_step"], 13 * 13 + 20);
 }
 
+/// The three setups of `bench pipeline` really run: shared memory, in
+/// process and over sockets each move environments, nothing is lost, and
+/// every round carries its figures (and the host's core-to-core round trip
+/// when there are two CPUs to measure it on).
+#[test]
+fn bench_pipeline_json_has_the_documented_fields_and_every_round() {
+    let out = worldgraph(&[
+        "bench",
+        "pipeline",
+        "--maze",
+        "small",
+        "--envs",
+        "16",
+        "--seconds",
+        "1",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = &json_lines(&out)[0];
+    for k in [
+        "ipc_steps_per_sec",
+        "inprocess_steps_per_sec",
+        "socket_steps_per_sec",
+        "roundtrip_p50_us",
+        "roundtrip_p99_us",
+        "ipc_to_inprocess",
+        "ipc_to_socket",
+    ] {
+        assert!(r[k].as_f64().is_some_and(|v| v > 0.0), "{k} in {r}");
+    }
+    assert_eq!(r["ipc_batches_lost"], 0);
+    let rounds = r["rounds"].as_array().expect("rounds");
+    assert_eq!(rounds.len(), 5);
+    for round in rounds {
+        assert!(
+            round["ipc_steps_per_sec"].as_f64().is_some_and(|v| v > 0.0),
+            "{round}"
+        );
+        assert!(
+            round["inprocess_steps_per_sec"]
+                .as_f64()
+                .is_some_and(|v| v > 0.0),
+            "{round}"
+        );
+    }
+    let two_cpus = std::thread::available_parallelism().is_ok_and(|n| n.get() >= 2);
+    if two_cpus {
+        assert!(
+            r["core_to_core_rtt_ns"]
+                .as_f64()
+                .is_some_and(|ns| ns > 0.0 && ns < 1e6),
+            "core-to-core round trip in {r}"
+        );
+    }
+}
+
 #[test]
 fn a_role_pinned_to_a_cpu_it_may_not_use_is_refused_naming_the_allowed_ones() {
     let dir = tempfile::tempdir().unwrap();
