@@ -265,6 +265,15 @@ impl PeerWatch {
         }
         PeerEvent::Quiet
     }
+
+    /// The peer just sent something, so it is alive: returns true when that
+    /// ends a `gone` spell (the caller announces the rejoin). A peer that
+    /// rejoins and keeps its partner busy may never leave it waiting long
+    /// enough for [`PeerWatch::poll`] to look.
+    pub fn heard_from(&mut self) -> bool {
+        self.missing_since = None;
+        std::mem::replace(&mut self.gone, false)
+    }
 }
 
 /// Resident set size of process `pid` in KiB (Linux `/proc`), if readable.

@@ -255,7 +255,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                     }
                     eprintln!("sim: waiting for a learner to rejoin at batch {seq}");
                 }
-                PeerEvent::Back => eprintln!("sim: a learner rejoined; continuing at batch {seq}"),
+                PeerEvent::Back => eprintln!("{}", rejoined(seq)),
                 PeerEvent::Quiet => {}
             }
             if backoff.waited() > Backoff::YIELD {
@@ -264,6 +264,9 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 publisher.update_connections()?;
             }
         };
+        if learner.gone && learner.heard_from() {
+            eprintln!("{}", rejoined(seq));
+        }
         let now = monotonic_ns();
         let slice = (seq % k_slices) as usize;
         rtt_interval.record(now - sent_at[slice]);
@@ -370,4 +373,9 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
 /// Nanoseconds to seconds.
 fn secs(ns: u64) -> f64 {
     ns as f64 * 1e-9
+}
+
+/// What the sim says when a learner is back after being declared gone.
+fn rejoined(seq: u64) -> String {
+    format!("sim: a learner rejoined; continuing at batch {seq}")
 }
