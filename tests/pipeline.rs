@@ -153,10 +153,13 @@ fn the_three_roles_exchange_data_through_shared_memory() {
     let planner = read_json(dir.path(), "planner.report.json");
     let batches = sim["batches"].as_u64().unwrap();
     assert!(batches > 100, "the sim published {batches} batches");
-    // Lock-step: the learner answered every batch but possibly the last one.
+    // Lock-step: the learner answered every batch but the last ones. At the
+    // stop, the sim's 2 slices are out awaiting answers, and the learner's
+    // last answer may be uncounted (sent, then interrupted while waiting for
+    // the next batch): `batches` - 3 at the least.
     let answered = learner["batches"].as_u64().unwrap();
     assert!(
-        answered + 1 >= batches - 1 && answered <= batches,
+        answered + 3 >= batches && answered <= batches,
         "{answered} answers to {batches} batches"
     );
     assert_eq!(learner["stream"]["lost"], 0);
