@@ -195,11 +195,12 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
 
     let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), PLANNER_NODE)?;
     node.cleanup_dead_nodes();
-    // Attached at once, so a shape or schema mismatch stops the planner now.
-    let mut obs = Some(
+    let attach = || {
         node.obs_subscriber(shape)
-            .context("planner: cannot open the observation service")?,
-    );
+            .context("planner: cannot open the observation service")
+    };
+    // Attached at once, so a shape or schema mismatch stops the planner now.
+    let mut obs = Some(attach()?);
     let mut attached_at = Instant::now();
     let server = node
         .route_server()
@@ -239,7 +240,7 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         if obs.is_some() && now - attached_at >= COVERAGE_WINDOW {
             obs = None;
         } else if obs.is_none() && now - attached_at >= COVERAGE_PERIOD {
-            obs = Some(node.obs_subscriber(shape)?);
+            obs = Some(attach()?);
             attached_at = now;
         }
         while let Some(sample) = obs.as_ref().map(|o| o.receive()).transpose()?.flatten() {

@@ -26,7 +26,6 @@
 //! publish).
 
 use std::io::Write;
-use std::time::Duration;
 
 use anyhow::Context;
 use clap::Args;
@@ -90,7 +89,7 @@ pub struct SimReport {
     /// Share of the loop's time spent waiting for action batches rather
     /// than stepping (loan + step + send): near 0 when the sim is the
     /// bottleneck, large when the learner or the transport is. Waits over
-    /// [`LONG_WAIT`] (a paused, dead or restarting learner) are left out.
+    /// [`LONG_WAIT_NS`] (a paused, dead or restarting learner) are left out.
     pub wait_fraction: f64,
     /// Why the loop ended.
     pub stopped_by: String,
@@ -98,12 +97,15 @@ pub struct SimReport {
 
 /// Waits for actions longer than this are a paused or absent learner, not
 /// the pipeline's rhythm ([`SimReport::wait_fraction`]).
-const LONG_WAIT: Duration = Duration::from_millis(1);
+const LONG_WAIT_NS: u64 = 1_000_000;
 
 /// How often a line is appended to `sim.stats.jsonl`.
-const STATS_EVERY: Duration = Duration::from_millis(250);
+const STATS_EVERY_NS: u64 = 250_000_000;
 
-/// One line of `sim.stats.jsonl`: progress every [`STATS_EVERY`], and a
+/// A minute in the loop's nanoseconds (per-minute round-trip summaries).
+const MINUTE_NS: u64 = 60_000_000_000;
+
+/// One line of `sim.stats.jsonl`: progress every [`STATS_EVERY_NS`], and a
 /// per-minute round-trip summary (`minute` set) every 60 s.
 #[derive(Debug, Serialize)]
 struct StatsLine {
@@ -215,8 +217,8 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let started = sent_at[0];
     let mut last_sent = started;
     let (mut env_steps, mut episodes, mut stale) = (0u64, 0u64, 0u64);
-    let mut next_stats = started + STATS_EVERY.as_nanos() as u64;
-    let mut next_minute = started + 60_000_000_000;
+    let mut next_stats = started + STATS_EVERY_NS;
+    let mut next_minute = started + MINUTE_NS;
     let mut minutes = 0u64;
     let (mut last_stats_seq, mut last_stats_t) = (0u64, started);
     let mut stopped_by = "stop request".to_string();
@@ -271,7 +273,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         let slice = (seq % k_slices) as usize;
         rtt_interval.record(now - sent_at[slice]);
         let waited = now - last_sent;
-        if waited <= LONG_WAIT.as_nanos() as u64 {
+        if waited <= LONG_WAIT_NS {
             wait_ns += waited;
         }
 
@@ -323,12 +325,12 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 line.minute_roundtrip_p99_us = Some(rtt_minute.percentile_us(99.0));
                 rtt_minute.reset();
                 minutes += 1;
-                next_minute += 60_000_000_000;
+                next_minute += MINUTE_NS;
             }
             writeln!(stats, "{}", serde_json::to_string(&line)?)?;
             ctx.report_on_request(&lat);
             (last_stats_seq, last_stats_t) = (seq, last_sent);
-            next_stats = last_sent + STATS_EVERY.as_nanos() as u64;
+            next_stats = last_sent + STATS_EVERY_NS;
             if ctx.should_stop() {
                 break;
             }
