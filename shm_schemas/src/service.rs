@@ -1554,6 +1554,13 @@ impl<S: Service> ActSample<S> {
     pub fn actions(&self) -> &[u8] {
         &self.sample.payload()[..self.num_envs as usize]
     }
+    /// Starts loading the actions' cache lines, which the learner wrote on
+    /// the other core, all at once: otherwise a step reaching each line
+    /// waits for it in turn (paired runs on 2 vCPUs: 0.3–2.8 % more
+    /// env-steps/s, 5 of 5).
+    pub fn prefetch_actions(&self) {
+        crate::raw::prefetch(self.actions());
+    }
 }
 
 // ---------------------------------------------------------------- route ports

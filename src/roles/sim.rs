@@ -266,6 +266,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 publisher.update_connections()?;
             }
         };
+        act.prefetch_actions();
         if learner.gone && learner.heard_from() {
             eprintln!("{}", rejoined(seq));
         }
