@@ -159,6 +159,10 @@ pub struct RoundStats {
     pub seconds: f64,
 }
 
+/// A buffered trajectory as checkpointed: `(cell, direction, carried)`
+/// for each state, then the actions.
+type SavedTrajectory = (Vec<(u32, u8, u8)>, Vec<u8>);
+
 /// What is checkpointed besides the weights.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct State {
@@ -172,7 +176,7 @@ struct State {
     pivotal: Vec<u32>,
     best_accuracy: f64,
     rounds_without_improvement: u32,
-    buffer: Vec<(Vec<(u32, u8, u8)>, Vec<u8>)>,
+    buffer: Vec<SavedTrajectory>,
     /// The latent model's Lagrange multipliers (eq. 3), which live outside
     /// its weights; `None` only in checkpoints written before they were kept.
     #[serde(default)]
@@ -692,7 +696,7 @@ impl Discovery {
             .var_store_mut()
             .load(&latent)
             .map_err(|e| ckpt(&latent, e))?;
-        self.gcp.load(&dir.join("gcp.ot"))?;
+        self.gcp.load(dir.join("gcp.ot"))?;
         if let Some(m) = state.multipliers {
             self.latent.model_mut().set_multipliers(m);
         }

@@ -207,7 +207,7 @@ impl<S: Service> ShmEnv<S> {
             }
             backoff.snooze();
             polls = polls.wrapping_add(1);
-            if polls % 256 != 0 {
+            if !polls.is_multiple_of(256) {
                 continue;
             }
             let now = Instant::now();

@@ -41,7 +41,7 @@ impl Backoff {
     pub fn snooze(&mut self) {
         self.polls = self.polls.wrapping_add(1);
         // Reading the clock costs ~20 ns: do it every 16 polls while spinning.
-        if self.polls < 64 || self.polls % 16 != 0 {
+        if self.polls < 64 || !self.polls.is_multiple_of(16) {
             std::hint::spin_loop();
             return;
         }

@@ -170,7 +170,7 @@ impl ObsShape {
         height: usize,
     ) -> Result<ObsShape, SchemaError> {
         check_range(Channel::Obs, "slices", slices, MAX_SLICES)?;
-        if total_envs % slices != 0 {
+        if !total_envs.is_multiple_of(slices) {
             return Err(SchemaError::SlicesDoNotDivide {
                 channel: Channel::Obs,
                 slices,

@@ -418,11 +418,9 @@ impl Env {
                     self.grid[front] = Object::Floor as u8;
                 }
             }
-            action::DROP => {
-                if self.carrying != NOTHING && self.grid[front] == Object::Floor as u8 {
-                    self.grid[front] = self.carrying;
-                    self.carrying = NOTHING;
-                }
+            action::DROP if self.carrying != NOTHING && self.grid[front] == Object::Floor as u8 => {
+                self.grid[front] = self.carrying;
+                self.carrying = NOTHING;
             }
             action::TOGGLE => match Object::from_code(self.grid[front]) {
                 Some(Object::DoorLocked) if self.carrying == Object::Key as u8 => {

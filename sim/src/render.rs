@@ -62,11 +62,9 @@ impl Canvas {
             return;
         }
         let i = (y as usize * self.width + x as usize) * 3;
-        for k in 0..3 {
-            let old = self.rgb[i + k] as f32;
-            self.rgb[i + k] = (old + (c[k] as f32 - old) * alpha)
-                .round()
-                .clamp(0.0, 255.0) as u8;
+        for (dst, &src) in self.rgb[i..i + 3].iter_mut().zip(c.iter()) {
+            let old = *dst as f32;
+            *dst = (old + (src as f32 - old) * alpha).round().clamp(0.0, 255.0) as u8;
         }
     }
 

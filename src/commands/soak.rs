@@ -119,7 +119,11 @@ struct ProcMem {
     max: u64,
 }
 
-fn last_progress(path: &Path) -> Option<(u32, u64)> {
+/// The sim's `(pid, seq)` from its latest progress line.
+type SimProgress = (u32, u64);
+
+/// The last line of `sim.stats.jsonl`, if any.
+fn last_progress(path: &Path) -> Option<SimProgress> {
     let f = std::fs::File::open(path).ok()?;
     let line = std::io::BufReader::new(f)
         .lines()
@@ -176,7 +180,9 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
     let end = start + Duration::from_secs_f64(a.minutes * 60.0);
     let mut rng = SmallRng::seed_from_u64(a.world.seed);
     let mut next_kill = a.kill_every.map(|k| start + Duration::from_secs_f64(k));
-    let mut pending: Option<(usize, Instant, Option<(u32, u64)>)> = None;
+    // The kill awaiting its recovery: its index in `recoveries`, when, and
+    // the sim's progress just before it.
+    let mut pending: Option<(usize, Instant, Option<SimProgress>)> = None;
     let mut recoveries: Vec<Recovery> = Vec::new();
     let mut mem: BTreeMap<(Role, u32), ProcMem> = BTreeMap::new();
     let mut next_sample = start;

@@ -237,7 +237,7 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             }
             backoff.snooze();
             polls = polls.wrapping_add(1);
-            if polls % 128 != 0 {
+            if !polls.is_multiple_of(128) {
                 continue;
             }
             if ctx.should_stop() {
