@@ -1,4 +1,4 @@
-//! The crate's only `unsafe` code, in three small helpers:
+//! The crate's only `unsafe` code, in small helpers:
 //!
 //! - [`assume_init_slice`] / [`assume_init_response`]: turn a freshly loaned,
 //!   "uninitialised" shared-memory chunk into an initialised one *without

@@ -1556,8 +1556,8 @@ impl<S: Service> ActSample<S> {
     }
     /// Starts loading the actions' cache lines, which the learner wrote on
     /// the other core, all at once: otherwise a step reaching each line
-    /// waits for it in turn (paired runs on 2 vCPUs: 0.3–2.8 % more
-    /// env-steps/s, 5 of 5).
+    /// waits for it in turn (paired runs on 2 vCPUs: 0.3–2.8 % of the sim's
+    /// cycle saved, 8 of 8; docs/implementation_details.md).
     pub fn prefetch_actions(&self) {
         crate::raw::prefetch(self.actions());
     }
