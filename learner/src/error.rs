@@ -7,17 +7,21 @@ use thiserror::Error;
 #[non_exhaustive]
 #[error("invalid config `{field}`: {reason}")]
 pub struct ConfigError {
-    /// The offending field, as spelled in the config file.
-    pub field: &'static str,
+    /// The offending field, as spelled in the config file (`section.field`
+    /// inside a section).
+    pub field: std::borrow::Cow<'static, str>,
     /// What is wrong with its value.
     pub reason: String,
 }
 
 impl ConfigError {
     /// An error for `field` with a human-readable `reason`.
-    pub fn new(field: &'static str, reason: impl Into<String>) -> Self {
+    pub fn new(
+        field: impl Into<std::borrow::Cow<'static, str>>,
+        reason: impl Into<String>,
+    ) -> Self {
         Self {
-            field,
+            field: field.into(),
             reason: reason.into(),
         }
     }

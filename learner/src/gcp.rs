@@ -42,10 +42,12 @@ use sim::{AutoReset, BallSpawn, Env, EnvConfig, Layout, Object, Pose, Task};
 use tch::nn::{self, OptimizerConfig};
 use tch::{Device, Kind, Tensor};
 
-use crate::actor_critic::{ActorCritic, ActorCriticConfig, LstmState, encode_obs};
+use crate::a2c::input::{CellInput, GoalMarks, mask};
+use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState};
+use crate::a2c::rollout::{GradPath, Rollout, bootstrap_values};
+use crate::a2c::{A2cConfig, LossFigures};
 use crate::batch_env::{BatchEnvironment, EnvError, ObsView};
 use crate::error::{ConfigError, LearnerError};
-use crate::gae::generalized_advantages;
 use crate::vae::{AgentPose, LatentModel, Trajectory, TrajectoryBatch};
 
 /// Settings of `π_g`. The paper gives no values for `π_g` beyond "A2C" and
@@ -119,6 +121,18 @@ impl GcpConfig {
         (self.goal_time_factor * walk_len.max(1)).min(u32::MAX as usize) as u32
     }
 
+    /// The A2C hyperparameters of `π_g`'s update.
+    pub fn a2c(&self) -> A2cConfig {
+        A2cConfig {
+            gamma: self.gamma,
+            gae_lambda: self.gae_lambda,
+            entropy_coef: self.entropy_coef,
+            value_coef: self.value_coef,
+            learning_rate: self.learning_rate,
+            grad_clip_norm: self.grad_clip_norm,
+        }
+    }
+
     /// The actor-critic of `π_g`: goal channel on, `num_actions` outputs.
     pub fn network(&self, num_actions: usize) -> ActorCriticConfig {
         ActorCriticConfig {
@@ -131,23 +145,6 @@ impl GcpConfig {
 
     /// Checks every field's range.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let unit = |field, v: f64| {
-            if (0.0..=1.0).contains(&v) {
-                Ok(())
-            } else {
-                Err(ConfigError::new(field, format!("{v} is not in [0, 1]")))
-            }
-        };
-        let non_negative = |field, v: f64| {
-            if v >= 0.0 && v.is_finite() {
-                Ok(())
-            } else {
-                Err(ConfigError::new(
-                    field,
-                    format!("{v} must be finite and ≥ 0"),
-                ))
-            }
-        };
         if self.rollout_len == 0 {
             return Err(ConfigError::new("rollout_len", "must be at least 1"));
         }
@@ -157,21 +154,11 @@ impl GcpConfig {
         if self.goal_time_factor == 0 {
             return Err(ConfigError::new("goal_time_factor", "must be at least 1"));
         }
-        unit("gamma", self.gamma)?;
-        unit("gae_lambda", self.gae_lambda)?;
-        non_negative("entropy_coef", self.entropy_coef)?;
-        non_negative("value_coef", self.value_coef)?;
-        non_negative("curiosity_coef", self.curiosity_coef)?;
-        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
+        self.a2c().validate("")?;
+        if !(self.curiosity_coef >= 0.0 && self.curiosity_coef.is_finite()) {
             return Err(ConfigError::new(
-                "learning_rate",
-                format!("{} must be finite and > 0", self.learning_rate),
-            ));
-        }
-        if !(self.grad_clip_norm > 0.0 && self.grad_clip_norm.is_finite()) {
-            return Err(ConfigError::new(
-                "grad_clip_norm",
-                format!("{} must be finite and > 0", self.grad_clip_norm),
+                "curiosity_coef",
+                format!("{} must be finite and ≥ 0", self.curiosity_coef),
             ));
         }
         if !self.goal_reward.is_finite() || !self.step_penalty.is_finite() {
@@ -503,6 +490,8 @@ pub struct GoalConditionedPolicy {
     book: GoalBook,
     /// LSTM state carried across rollouts (detached between updates).
     state: LstmState,
+    /// The rollout being collected (its buffers are reused).
+    rollout: Rollout,
 }
 
 impl std::fmt::Debug for GoalConditionedPolicy {
@@ -570,7 +559,20 @@ impl GoalConditionedPolicy {
                 true,
             ),
             state,
+            rollout: Rollout::new(
+                GradPath::default(),
+                num_envs,
+                layout.width,
+                layout.height,
+                true,
+            ),
         })
+    }
+
+    /// Chooses how the update gets its gradients (the benchmark's plain
+    /// path is [`GradPath::PerStep`]); the result is the same either way.
+    pub fn set_grad_path(&mut self, path: GradPath) {
+        self.rollout = Rollout::new(path, self.num_envs, self.width, self.height, true);
     }
 
     /// Starts a round of the discovery loop from the weights alone: goal
@@ -669,7 +671,9 @@ impl GoalConditionedPolicy {
                 height: obs.height,
             });
         }
-        let out = tch::no_grad(|| self.net.forward(&encode_obs(obs, Some(goals)), state));
+        let mut input = CellInput::new(obs.width, obs.height, true);
+        input.push_obs(obs, Some(GoalMarks::one(goals)));
+        let out = tch::no_grad(|| self.net.step(&input, state));
         let actions = self.choose_actions(&out.logits, true);
         Ok((actions, out.state))
     }
@@ -685,7 +689,7 @@ impl GoalConditionedPolicy {
     /// - `done_t = 1` when the goal episode ended (goal reached, time limit,
     ///   or the environment's episode ended); the LSTM state is reset there;
     /// - advantages `Â_t` and returns `R_t = Â_t + V(s_t)` by GAE
-    ///   ([`generalized_advantages`]) over `[T, B]`, bootstrapped with
+    ///   ([`crate::a2c::advantages`]) over `[T, B]`, bootstrapped with
     ///   `V(s_T)` `[B]`.
     ///
     /// Loss, every term a mean over `[T, B]`:
@@ -708,24 +712,22 @@ impl GoalConditionedPolicy {
             let restarted = self.book.sync(&mut self.sampler, &obs);
             self.state = self.state.reset_done(&mask(&restarted));
         }
-        let mut logits = Vec::with_capacity(steps);
-        let mut values = Vec::with_capacity(steps);
-        let mut actions = Vec::with_capacity(steps * b);
-        let mut rewards = Vec::with_capacity(steps * b);
-        let mut dones = Vec::with_capacity(steps * b);
+        self.rollout.start(&self.state);
         // Poses s_0 … s_T: T + 1 rows, the last one the state after the
         // rollout, so every action that did not end an episode has its
         // successor state (for the curiosity's trajectories).
         let mut poses = Vec::with_capacity((steps + 1) * b);
         let mut env_ended = Vec::with_capacity(steps * b);
         let (mut finished, mut successes, mut success_steps) = (0usize, 0usize, 0u64);
+        let weights = vec![1f32; b];
         for _ in 0..steps {
             let (out, chosen) = {
                 let obs = env.observe();
                 poses.extend(obs.meta.iter().map(|m| agent_pose(m, self.width)));
-                let out = self
-                    .net
-                    .forward(&encode_obs(&obs, Some(&self.book.goals())), &self.state);
+                let goals = self.book.goals();
+                let out =
+                    self.rollout
+                        .act(&self.net, &obs, Some(GoalMarks::one(&goals)), &self.state);
                 let chosen = self.choose_actions(&out.logits, false);
                 (out, chosen)
             };
@@ -734,10 +736,9 @@ impl GoalConditionedPolicy {
             let booked = self
                 .book
                 .advance(&mut self.sampler, &obs, &chosen, &self.cfg);
+            let rewards: Vec<f32> = booked.iter().map(|s| s.reward).collect();
             let goal_done: Vec<bool> = booked.iter().map(|s| s.goal_done).collect();
             for s in &booked {
-                rewards.push(s.reward);
-                dones.push(f32::from(u8::from(s.goal_done)));
                 env_ended.push(s.env_ended);
                 if s.goal_done {
                     finished += 1;
@@ -747,57 +748,36 @@ impl GoalConditionedPolicy {
                     }
                 }
             }
-            actions.extend(chosen.iter().map(|&a| i64::from(a)));
+            self.rollout.record(&chosen, &rewards, &goal_done, &weights);
             self.state = out.state.reset_done(&mask(&goal_done));
-            logits.push(out.logits);
-            values.push(out.value);
         }
-        let bootstrap_value = {
+        {
             let obs = env.observe();
             poses.extend(obs.meta.iter().map(|m| agent_pose(m, self.width)));
-            tch::no_grad(|| {
-                self.net
-                    .forward(&encode_obs(&obs, Some(&self.book.goals())), &self.state)
-                    .value
-            })
-        };
+            let goals = self.book.goals();
+            self.rollout.bootstrap =
+                bootstrap_values(&self.net, &obs, Some(GoalMarks::one(&goals)), &self.state);
+        }
 
-        let shape = [steps as i64, b as i64];
-        let mut rewards = Tensor::from_slice(&rewards).view(shape);
         let mut mean_curiosity = 0.0;
         if let Some(model) = curiosity {
+            let actions: Vec<i64> = self.rollout.actions.clone();
             let bonus = curiosity_bonus(model, &poses, &actions, &env_ended, steps, b)?
                 .clamp(0.0, CURIOSITY_CAP_NATS)
                 * self.cfg.curiosity_coef;
             mean_curiosity = bonus.mean(Kind::Float).double_value(&[]);
-            rewards += bonus;
+            let bonus: Vec<f32> =
+                Vec::try_from(bonus.flatten(0, -1)).map_err(LearnerError::from)?;
+            self.rollout.add_to_rewards(&bonus);
         }
-        let dones = Tensor::from_slice(&dones).view(shape);
-        let actions = Tensor::from_slice(&actions).view(shape);
-        let logits = Tensor::stack(&logits, 0);
-        let values = Tensor::stack(&values, 0);
-        let gae = generalized_advantages(
-            &rewards,
-            &values,
-            &dones,
-            &bootstrap_value,
-            self.cfg.gamma,
-            self.cfg.gae_lambda,
-        );
-
-        let log_probs = logits.log_softmax(-1, Kind::Float);
-        let taken = log_probs
-            .gather(2, &actions.unsqueeze(-1), false)
-            .squeeze_dim(-1);
-        let entropy = -(log_probs.exp() * &log_probs)
-            .sum_dim_intlist(-1, false, Kind::Float)
-            .mean(Kind::Float);
-        let policy_loss = -(gae.advantages * taken).mean(Kind::Float);
-        let value_loss = (gae.returns - values).square().mean(Kind::Float) * 0.5;
-        let loss =
-            &policy_loss + &value_loss * self.cfg.value_coef - &entropy * self.cfg.entropy_coef;
-        self.opt
-            .backward_step_clip_norm(&loss, self.cfg.grad_clip_norm);
+        let LossFigures {
+            policy_loss,
+            value_loss,
+            entropy,
+            ..
+        } = self
+            .rollout
+            .update(&self.net, &mut self.opt, &self.cfg.a2c());
         // Truncated BPTT: the next rollout starts from this state, detached.
         self.state = self.state.detach();
 
@@ -813,9 +793,9 @@ impl GoalConditionedPolicy {
             } else {
                 success_steps as f64 / successes as f64
             },
-            policy_loss: policy_loss.double_value(&[]),
-            value_loss: value_loss.double_value(&[]),
-            entropy: entropy.double_value(&[]),
+            policy_loss,
+            value_loss,
+            entropy,
             mean_curiosity,
         })
     }
@@ -887,12 +867,6 @@ fn checkpoint_error(path: &Path, e: tch::TchError) -> LearnerError {
         path: path.display().to_string(),
         message: e.to_string(),
     }
-}
-
-/// `[B]` float mask, 1 where `flags[i]`.
-fn mask(flags: &[bool]) -> Tensor {
-    let v: Vec<f32> = flags.iter().map(|&f| f32::from(u8::from(f))).collect();
-    Tensor::from_slice(&v)
 }
 
 /// The curiosity bonus of a rollout (section 3.2): the latent model's

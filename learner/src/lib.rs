@@ -11,12 +11,11 @@
 //! action reconstruction error is the curiosity bonus of `π_g`.
 #![deny(unsafe_code)]
 
-pub mod actor_critic;
+pub mod a2c;
 pub mod batch_env;
 pub mod discovery;
 pub mod edge_refinement;
 pub mod error;
-pub mod gae;
 pub mod gcp;
 pub mod policy;
 pub mod seeding;

@@ -8,7 +8,8 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use tch::{Kind, nn};
 
-use crate::actor_critic::{ActorCritic, ActorCriticConfig, LstmState, encode_obs};
+use crate::a2c::input::CellInput;
+use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState};
 use crate::batch_env::ObsView;
 
 /// Chooses one action per environment.
@@ -95,7 +96,9 @@ impl Policy for ActorCriticPolicy {
                 .map(|m| f32::from(u8::from(m.done())))
                 .collect();
             let state = self.state.reset_done(&tch::Tensor::from_slice(&done));
-            let out = self.net.forward(&encode_obs(obs, None), &state);
+            let mut input = CellInput::new(obs.width, obs.height, false);
+            input.push_obs(obs, None);
+            let out = self.net.step(&input, &state);
             let probs = out.logits.softmax(-1, Kind::Float);
             let sampled = crate::seeding::sample_categorical(&mut self.rng, &probs, false);
             for (a, s) in actions.iter_mut().zip(sampled) {

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use iceoryx2::prelude::ipc;
-use learner::actor_critic::ActorCriticConfig;
+use learner::a2c::net::ActorCriticConfig;
 use learner::batch_env::{BatchEnvironment, EnvError};
 use learner::policy::{ActorCriticPolicy, Policy, RandomPolicy};
 use learner::shm_env::{ShmEnv, ShmEnvOptions, StreamStats};

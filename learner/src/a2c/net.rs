@@ -1,0 +1,365 @@
+//! The A2C-LSTM networks: a CNN encoder and an LSTM core (the *trunk*),
+//! then heads (Shang et al. 2019, section 4.1: "A2C models both a value
+//! function V(s_t) ... and a policy π"; the Manager, the Worker and `π_g`
+//! are all A2C-LSTMs at different time scales). Encoder / core / heads are
+//! split as Sample Factory does, so the Manager and the Worker reuse the
+//! trunk under their own heads and `π_g` initialisation copies it
+//! ([`crate::hrl::init`]).
+//!
+//! Encoder: 3×3 conv (stride 1) → ReLU → 3×3 conv (stride 2) → ReLU →
+//! linear → ReLU. The first convolution runs either densely on one-hot
+//! planes (the plain path, [`Trunk::features_dense`]) or as an
+//! embedding-bag over the active cells ([`Trunk::features`], see
+//! [`crate::a2c::input`]); both use the same weights.
+//!
+//! Variable names (`encoder.conv1`, `encoder.conv2`, `encoder.fc`,
+//! `core.weight_ih_l0`, ...) are those of tch's `nn::conv2d`, `nn::linear`
+//! and `nn::lstm`, created in the same order with the same initialisers, so
+//! checkpoints of earlier versions load unchanged.
+
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, Module};
+use tch::{Device, Kind, Tensor};
+
+use super::input::{BASE_CHANNELS, CellInput, first_conv};
+
+/// Sizes of an actor-critic (CPU-sized defaults).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct ActorCriticConfig {
+    /// Output channels of the two 3×3 convolutions (the second has stride 2).
+    pub conv_channels: [i64; 2],
+    /// Width of the encoder's output and of the LSTM core.
+    pub hidden: i64,
+    /// Actions of the policy head.
+    pub num_actions: i64,
+    /// Whether a goal channel is part of the input (`π_g`, the Worker).
+    pub goal_channel: bool,
+}
+
+impl Default for ActorCriticConfig {
+    fn default() -> Self {
+        ActorCriticConfig {
+            conv_channels: [16, 32],
+            hidden: 128,
+            num_actions: 3,
+            goal_channel: false,
+        }
+    }
+}
+
+impl ActorCriticConfig {
+    /// Input channels.
+    pub fn in_channels(&self) -> i64 {
+        (BASE_CHANNELS + usize::from(self.goal_channel)) as i64
+    }
+}
+
+/// LSTM state of a batch, `h` and `c` of shape `[B, hidden]`.
+#[derive(Debug)]
+pub struct LstmState {
+    /// Hidden state.
+    pub h: Tensor,
+    /// Cell state.
+    pub c: Tensor,
+}
+
+impl LstmState {
+    /// Zero state for `batch` environments.
+    pub fn zeros(batch: i64, hidden: i64) -> LstmState {
+        LstmState {
+            h: Tensor::zeros([batch, hidden], (Kind::Float, Device::Cpu)),
+            c: Tensor::zeros([batch, hidden], (Kind::Float, Device::Cpu)),
+        }
+    }
+
+    /// Zeroes the state of environments whose episode just ended
+    /// (`done[i] = 1`): CleanRL's `(1 - done)` trick, written once.
+    pub fn reset_done(&self, done: &Tensor) -> LstmState {
+        let keep: Tensor = done
+            .to_kind(Kind::Float)
+            .neg()
+            .g_add_scalar(1.0)
+            .unsqueeze(1);
+        LstmState {
+            h: &self.h * &keep,
+            c: &self.c * &keep,
+        }
+    }
+
+    /// A copy detached from the autograd graph (truncated BPTT).
+    pub fn detach(&self) -> LstmState {
+        LstmState {
+            h: self.h.detach(),
+            c: self.c.detach(),
+        }
+    }
+
+    /// The rows `index` (`[K]` int64) of the batch.
+    pub fn select(&self, index: &Tensor) -> LstmState {
+        LstmState {
+            h: self.h.index_select(0, index),
+            c: self.c.index_select(0, index),
+        }
+    }
+
+    /// Writes `rows` into the rows `index` of this state.
+    pub fn scatter(&mut self, index: &Tensor, rows: &LstmState) {
+        self.h = self.h.index_copy(0, index, &rows.h);
+        self.c = self.c.index_copy(0, index, &rows.c);
+    }
+
+    /// A copy sharing no storage.
+    pub fn copy(&self) -> LstmState {
+        LstmState {
+            h: self.h.copy(),
+            c: self.c.copy(),
+        }
+    }
+}
+
+/// The LSTM core, one cell step at a time (`lstm_cell`), with the weights
+/// `nn::lstm` would create.
+#[derive(Debug)]
+struct LstmCore {
+    w_ih: Tensor,
+    w_hh: Tensor,
+    b_ih: Tensor,
+    b_hh: Tensor,
+}
+
+impl LstmCore {
+    fn new(p: &nn::Path, input: i64, hidden: i64) -> LstmCore {
+        let gates = 4 * hidden;
+        let init = nn::init::DEFAULT_KAIMING_UNIFORM;
+        LstmCore {
+            w_ih: p.var("weight_ih_l0", &[gates, input], init),
+            w_hh: p.var("weight_hh_l0", &[gates, hidden], init),
+            b_ih: p.var("bias_ih_l0", &[gates], nn::Init::Const(0.)),
+            b_hh: p.var("bias_hh_l0", &[gates], nn::Init::Const(0.)),
+        }
+    }
+
+    fn step(&self, x: &Tensor, state: &LstmState) -> LstmState {
+        let (h, c) = x.lstm_cell(
+            &[&state.h, &state.c],
+            &self.w_ih,
+            &self.w_hh,
+            Some(&self.b_ih),
+            Some(&self.b_hh),
+        );
+        LstmState { h, c }
+    }
+}
+
+/// Encoder + LSTM core.
+#[derive(Debug)]
+pub struct Trunk {
+    conv1: nn::Conv2D,
+    conv2: nn::Conv2D,
+    fc: nn::Linear,
+    core: LstmCore,
+    hidden: i64,
+    in_channels: i64,
+    width: usize,
+    height: usize,
+}
+
+impl Trunk {
+    /// A trunk under `p` (`p / "encoder"`, `p / "core"`) for `width ×
+    /// height` grids with `in_channels` input planes.
+    pub fn new(
+        p: &nn::Path,
+        in_channels: i64,
+        conv_channels: [i64; 2],
+        hidden: i64,
+        width: usize,
+        height: usize,
+    ) -> Trunk {
+        let [c1, c2] = conv_channels;
+        let conv = |stride| nn::ConvConfig {
+            stride,
+            padding: 1,
+            ..Default::default()
+        };
+        let (h2, w2) = ((height as i64 + 1) / 2, (width as i64 + 1) / 2);
+        let enc = p / "encoder";
+        let conv1 = nn::conv2d(&enc / "conv1", in_channels, c1, 3, conv(1));
+        let conv2 = nn::conv2d(&enc / "conv2", c1, c2, 3, conv(2));
+        let fc = nn::linear(&enc / "fc", c2 * h2 * w2, hidden, Default::default());
+        let core = LstmCore::new(&(p / "core"), hidden, hidden);
+        Trunk {
+            conv1,
+            conv2,
+            fc,
+            core,
+            hidden,
+            in_channels,
+            width,
+            height,
+        }
+    }
+
+    /// Width of the features and of the core.
+    pub fn hidden(&self) -> i64 {
+        self.hidden
+    }
+
+    /// Input planes.
+    pub fn in_channels(&self) -> i64 {
+        self.in_channels
+    }
+
+    /// Grid `(width, height)`.
+    pub fn grid(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Zero core state for `batch` environments.
+    pub fn zero_state(&self, batch: i64) -> LstmState {
+        LstmState::zeros(batch, self.hidden)
+    }
+
+    fn after_conv1(&self, y: Tensor) -> Tensor {
+        self.conv2
+            .forward(&y.relu())
+            .relu()
+            .flatten(1, -1)
+            .apply(&self.fc)
+            .relu()
+    }
+
+    /// Encoder features `[N, hidden]` of a [`CellInput`] (the fast path).
+    pub fn features(&self, input: &CellInput) -> Tensor {
+        self.after_conv1(first_conv(input, &self.conv1.ws, self.conv1.bs.as_ref()))
+    }
+
+    /// Encoder features `[N, hidden]` of dense one-hot planes `[N, C, H, W]`
+    /// (the plain path).
+    pub fn features_dense(&self, x: &Tensor) -> Tensor {
+        self.after_conv1(self.conv1.forward(x))
+    }
+
+    /// One core step.
+    pub fn step(&self, features: &Tensor, state: &LstmState) -> LstmState {
+        self.core.step(features, state)
+    }
+
+    /// The core over a sequence: `features` `[K, B, hidden]`, the state
+    /// reset before step `k` where `reset_before[k, b] = 1` (`[K, B]`
+    /// float). Returns the hidden states `[K, B, hidden]` and the state
+    /// after the last step.
+    pub fn unroll(
+        &self,
+        features: &Tensor,
+        init: &LstmState,
+        reset_before: &Tensor,
+    ) -> (Tensor, LstmState) {
+        let steps = features.size()[0];
+        let mut state = LstmState {
+            h: init.h.shallow_clone(),
+            c: init.c.shallow_clone(),
+        };
+        let mut hs = Vec::with_capacity(steps as usize);
+        for k in 0..steps {
+            state = self
+                .core
+                .step(&features.get(k), &state.reset_done(&reset_before.get(k)));
+            hs.push(state.h.shallow_clone());
+        }
+        (Tensor::stack(&hs, 0), state)
+    }
+}
+
+/// What an actor-critic outputs for one step.
+#[derive(Debug)]
+pub struct ActorCriticOutput {
+    /// Action logits `[B, A]`.
+    pub logits: Tensor,
+    /// State values `[B]`.
+    pub value: Tensor,
+    /// The core's next state.
+    pub state: LstmState,
+}
+
+/// A trunk with a policy head over a fixed action set and a value head:
+/// `π_g`, the A2C baseline and the Worker.
+#[derive(Debug)]
+pub struct ActorCritic {
+    trunk: Trunk,
+    policy: nn::Linear,
+    value: nn::Linear,
+    cfg: ActorCriticConfig,
+}
+
+impl ActorCritic {
+    /// Builds the network under `p` for grids of `width × height`.
+    pub fn new(p: &nn::Path, cfg: &ActorCriticConfig, width: usize, height: usize) -> ActorCritic {
+        let trunk = Trunk::new(
+            p,
+            cfg.in_channels(),
+            cfg.conv_channels,
+            cfg.hidden,
+            width,
+            height,
+        );
+        let policy = nn::linear(
+            p / "policy",
+            cfg.hidden,
+            cfg.num_actions,
+            Default::default(),
+        );
+        let value = nn::linear(p / "value", cfg.hidden, 1, Default::default());
+        ActorCritic {
+            trunk,
+            policy,
+            value,
+            cfg: cfg.clone(),
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ActorCriticConfig {
+        &self.cfg
+    }
+
+    /// The encoder and core.
+    pub fn trunk(&self) -> &Trunk {
+        &self.trunk
+    }
+
+    /// Zero core state for `batch` environments.
+    pub fn zero_state(&self, batch: i64) -> LstmState {
+        self.trunk.zero_state(batch)
+    }
+
+    /// Policy logits `[.., A]` and values `[..]` of core outputs `[.., hidden]`.
+    pub fn heads(&self, h: &Tensor) -> (Tensor, Tensor) {
+        (
+            self.policy.forward(h),
+            self.value.forward(h).squeeze_dim(-1),
+        )
+    }
+
+    /// One step on a [`CellInput`] of `B` observations (the fast path).
+    pub fn step(&self, input: &CellInput, state: &LstmState) -> ActorCriticOutput {
+        let state = self.trunk.step(&self.trunk.features(input), state);
+        let (logits, value) = self.heads(&state.h);
+        ActorCriticOutput {
+            logits,
+            value,
+            state,
+        }
+    }
+
+    /// One step on dense one-hot planes `[B, C, H, W]` (the plain path).
+    pub fn forward(&self, obs: &Tensor, state: &LstmState) -> ActorCriticOutput {
+        let state = self.trunk.step(&self.trunk.features_dense(obs), state);
+        let (logits, value) = self.heads(&state.h);
+        ActorCriticOutput {
+            logits,
+            value,
+            state,
+        }
+    }
+}
