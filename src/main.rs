@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 
 mod commands;
 mod latency;
+mod progress;
 mod pipeline;
 mod roles;
 mod world;
@@ -38,6 +39,12 @@ enum Command {
     /// Stage 1: discover pivotal states and build the world graph (latent
     /// model + goal-conditioned policy), resumable, with pictures.
     Discover(commands::discover::DiscoverArgs),
+    /// Stage 2: train one agent (A2C, FN, WN) on one task and maze with the
+    /// paper's protocol (validation picks the best checkpoint, held-out test
+    /// seeds score it), resumable, with curves and an episode picture.
+    Train(commands::train::TrainArgs),
+    /// Score a `train` run's best checkpoint on any range of test seeds.
+    Evaluate(commands::train::EvaluateArgs),
     /// Simulator tools: render a maze, trace an action sequence.
     #[command(subcommand)]
     Sim(commands::sim::SimCommand),
@@ -73,6 +80,8 @@ fn run() -> anyhow::Result<ExitCode> {
         Command::Run(a) => commands::run::run(a),
         Command::Discover(a) => commands::discover::run(a),
         Command::Soak(a) => commands::soak::run(a),
+        Command::Train(a) => commands::train::run(a),
+        Command::Evaluate(a) => commands::train::evaluate(a),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
         Command::Planner(PlannerCommand::Serve(a)) => roles::planner::serve(a),

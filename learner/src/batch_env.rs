@@ -109,6 +109,14 @@ impl InProcess {
         Ok(InProcess { batch, buf, seq: 0 })
     }
 
+    /// An existing batch (e.g. [`BatchEnv::with_first_index`]'s, for seeds
+    /// of a stream from an offset), reset.
+    pub fn from_batch(mut batch: BatchEnv) -> InProcess {
+        let mut buf = batch.buffers();
+        batch.reset(buf.out());
+        InProcess { batch, buf, seq: 0 }
+    }
+
     /// The simulator batch.
     pub fn batch(&self) -> &BatchEnv {
         &self.batch

@@ -45,7 +45,7 @@ use tch::{Device, Kind, Tensor};
 use crate::a2c::input::{CellInput, GoalMarks, mask};
 use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState};
 use crate::a2c::rollout::{GradPath, Rollout, bootstrap_values};
-use crate::a2c::{A2cConfig, LossFigures};
+use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
 use crate::batch_env::{BatchEnvironment, EnvError, ObsView};
 use crate::error::{ConfigError, LearnerError};
 use crate::vae::{AgentPose, LatentModel, Trajectory, TrajectoryBatch};
@@ -575,6 +575,11 @@ impl GoalConditionedPolicy {
         self.rollout = Rollout::new(path, self.num_envs, self.width, self.height, true);
     }
 
+    /// Where training time went since the last [`Self::take_times`].
+    pub fn take_times(&mut self) -> PhaseTimes {
+        std::mem::take(&mut self.rollout.times)
+    }
+
     /// Starts a round of the discovery loop from the weights alone: goal
     /// samplers and the action RNG reseeded from `seed`, the LSTM state
     /// zeroed, open goal episodes dropped and a fresh Adam optimiser (its
@@ -731,7 +736,9 @@ impl GoalConditionedPolicy {
                 let chosen = self.choose_actions(&out.logits, false);
                 (out, chosen)
             };
+            let t0 = std::time::Instant::now();
             env.step(&chosen)?;
+            PhaseTimes::lap(&mut self.rollout.times.step, t0);
             let obs = env.observe();
             let booked = self
                 .book

@@ -17,6 +17,7 @@ pub mod discovery;
 pub mod edge_refinement;
 pub mod error;
 pub mod gcp;
+pub mod hrl;
 pub mod policy;
 pub mod seeding;
 pub mod shm_env;

@@ -70,6 +70,29 @@ pub fn sample_categorical(rng: &mut SmallRng, probs: &Tensor, greedy: bool) -> V
         .collect()
 }
 
+/// One draw per row of `probs` (`[B, A]`) by inverse CDF with `rng`, as
+/// an index (for choice sets larger than 256: a Manager's subgoal cells).
+pub fn sample_index(rng: &mut SmallRng, probs: &Tensor) -> Vec<usize> {
+    let width = probs.size()[1] as usize;
+    let flat: Vec<f32> = tch::no_grad(|| Vec::try_from(probs.to_kind(Kind::Float).contiguous().flatten(0, -1)))
+        .expect("invariant: probabilities convert to a float vector");
+    flat.chunks_exact(width)
+        .map(|p| {
+            let u: f32 = rng.random();
+            let mut cumulative = 0.0;
+            // The last choice with non-zero probability takes any rounding
+            // remainder (never a masked one).
+            let last = p.iter().rposition(|&q| q > 0.0).unwrap_or(width - 1);
+            p.iter()
+                .position(|&q| {
+                    cumulative += q;
+                    q > 0.0 && u < cumulative
+                })
+                .unwrap_or(last)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use rand::SeedableRng;

@@ -18,6 +18,9 @@ pub enum BenchCommand {
     /// The three processes over shared memory against the same workload in
     /// one process and over Unix sockets.
     Pipeline(super::bench_pipeline::BenchPipelineArgs),
+    /// Training throughput of a learner (π_g, A2C, FN, WN): the fast path
+    /// against the plain one, where the time goes, FLOPs against a matmul.
+    Learner(super::bench_learner::BenchLearnerArgs),
     /// Route-query latency and all-pairs shortest-path rebuild time.
     Planner(super::bench_planner::BenchPlannerArgs),
     /// Internal: the peer end of `bench pipeline`'s socket transport.
@@ -82,6 +85,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<std::process::ExitCode> {
     match cmd {
         BenchCommand::Pipeline(a) => return super::bench_pipeline::run(a),
         BenchCommand::Planner(a) => return super::bench_planner::run(a),
+        BenchCommand::Learner(a) => return super::bench_learner::run(a),
         BenchCommand::SocketPeer(a) => return super::bench_pipeline::socket_peer(a),
         BenchCommand::Sim(a) => {
             let r = bench_sim(&a)?;

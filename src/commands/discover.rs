@@ -260,6 +260,13 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     };
     graph.save(&dir.join("graph.json"))?;
     graph.save_png(&dir.join("graph.png"), 24)?;
+    // What stage 2 (`worldgraph train --world-graph`) takes besides the
+    // graph: π_g's settings and weights.
+    sim::render::write_atomic(
+        &dir.join("pi_g.json"),
+        &serde_json::to_vec_pretty(disc.gcp().config())?,
+    )?;
+    disc.gcp().save(dir.join("pi_g.ot"))?;
 
     let history = disc.history().to_vec();
     let env_steps: u64 = history.iter().map(|h| h.env_steps).sum();

@@ -1,6 +1,7 @@
 //! One module per top-level command.
 
 pub mod bench;
+pub mod bench_learner;
 pub mod bench_pipeline;
 pub mod bench_planner;
 pub mod demo;
@@ -8,3 +9,4 @@ pub mod discover;
 pub mod run;
 pub mod sim;
 pub mod soak;
+pub mod train;

@@ -9,13 +9,15 @@
 //!
 //! - [`encode_obs`] writes those planes densely: the plain path, a 3×3
 //!   convolution over mostly-zero input.
-//! - [`CellInput`] lists, for every output position of that convolution,
-//!   the `(channel, kernel offset)` pairs whose input is 1. Since the input
+//! - [`CellInput`] keeps the observation compact (each cell's object
+//!   channel, the agent's pose, the key, the goal cells). Since the input
 //!   is 0/1, the convolution at a position is the sum of the kernel columns
-//!   `W[:, c, k]` over that list: an `embedding_bag` (sum mode) over the
-//!   kernel viewed as a `[C·9, out]` table ([`first_conv`]). It computes
+//!   `W[:, c, k]` of the inputs that are 1 under it: per tap `k`, one row of
+//!   a 10-row table per cell (its object kind, or zero padding), plus the
+//!   nine positions each agent or goal cell touches, plus the key plane's
+//!   per-position sum ([`first_conv`], [`FirstLayer::Gather`]). It computes
 //!   the same function and the same gradients with a small fraction of the
-//!   multiply-adds (about ten table rows per position instead of `C·9`).
+//!   multiply-adds (ten table rows per position instead of `C·9`).
 //!
 //! Both forms are built straight from an [`ObsView`]; [`CellInput`] can
 //! append many observation batches (a whole rollout) so the update encodes
@@ -37,6 +39,8 @@ pub const GOAL_CHANNEL: usize = BASE_CHANNELS;
 pub const NO_GOAL: u32 = u32::MAX;
 /// Positions of a 3×3 kernel.
 const TAPS: usize = 9;
+/// The object code of a neighbour outside the grid (zero padding).
+const PAD_CODE: u64 = 0xF;
 
 /// Goal cells to mark, `per_env` slots per environment (unused slots hold
 /// [`NO_GOAL`]): one for `π_g` and the Feudal Worker, two (`g_w`, `g_n`)
@@ -98,53 +102,47 @@ pub fn encode_obs(obs: &ObsView<'_>, goals: Option<GoalMarks<'_>>) -> Tensor {
     Tensor::from_slice(&buf).view([n as i64, c as i64, h as i64, w as i64])
 }
 
-/// A batch of observations as the bags of the first convolution's
-/// `embedding_bag` (module docs): for every observation and output position
-/// `p` (row-major, `H·W` per observation), the table rows
-/// `channel · 9 + tap` of the inputs that are 1 under the kernel centred on
-/// `p`.
+/// How the first convolution is computed from a [`CellInput`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FirstLayer {
+    /// Gather-and-sum: per kernel tap, the kernel column of each cell's
+    /// object kind (an `index_select` from a 10-row table), plus the few
+    /// positions the agent and the goals touch, plus the key plane's
+    /// per-position sum.
+    #[default]
+    Gather,
+    /// The dense one-hot planes through the convolution.
+    Dense,
+}
+
+/// A batch of observations in the compact form the first convolution
+/// reads (module docs): each cell's object channel, the agent's cell and
+/// facing, whether the key is carried, and the goal cells.
 #[derive(Debug, Clone, Default)]
 pub struct CellInput {
     width: usize,
     height: usize,
     goal_channel: bool,
-    /// Table rows, bag after bag.
-    indices: Vec<i64>,
-    /// Start of each bag in `indices`, one per output position.
-    offsets: Vec<i64>,
-    /// Observations appended.
-    len: usize,
-    /// Per cell and tap: the input cell under that tap, or `u32::MAX`
-    /// outside the grid (zero padding).
-    neighbours: Vec<u32>,
+    /// Goal slots per observation (0 without the goal channel).
+    slots: usize,
+    /// Object channel of every cell, observation after observation.
+    codes: Vec<u8>,
+    /// The agent's cell (or `u32::MAX` off the grid) and facing.
+    agents: Vec<(u32, u8)>,
+    /// The key is carried.
+    keys: Vec<bool>,
+    /// Goal cells, `slots` per observation ([`NO_GOAL`] for none).
+    goals: Vec<u32>,
 }
 
 impl CellInput {
     /// An empty batch for `width × height` grids, with or without the goal
     /// channel.
     pub fn new(width: usize, height: usize, goal_channel: bool) -> CellInput {
-        let mut neighbours = Vec::with_capacity(width * height * TAPS);
-        for y in 0..height as i64 {
-            for x in 0..width as i64 {
-                for ky in -1..=1 {
-                    for kx in -1..=1 {
-                        let (qy, qx) = (y + ky, x + kx);
-                        let inside =
-                            (0..height as i64).contains(&qy) && (0..width as i64).contains(&qx);
-                        neighbours.push(if inside {
-                            (qy * width as i64 + qx) as u32
-                        } else {
-                            u32::MAX
-                        });
-                    }
-                }
-            }
-        }
         CellInput {
             width,
             height,
             goal_channel,
-            neighbours,
             ..CellInput::default()
         }
     }
@@ -154,25 +152,31 @@ impl CellInput {
         BASE_CHANNELS + usize::from(self.goal_channel)
     }
 
+    /// Grid `(width, height)`.
+    pub fn grid(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
     /// Observations appended so far.
     pub fn len(&self) -> usize {
-        self.len
+        self.keys.len()
     }
 
     /// True when nothing was appended.
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.keys.is_empty()
     }
 
     /// Forgets the observations, keeping the buffers.
     pub fn clear(&mut self) {
-        self.indices.clear();
-        self.offsets.clear();
-        self.len = 0;
+        self.codes.clear();
+        self.agents.clear();
+        self.keys.clear();
+        self.goals.clear();
     }
 
     /// Appends every environment of `obs` (goal cells marked when this
-    /// batch has the goal channel; `goals` is then required).
+    /// batch has the goal channel).
     pub fn push_obs(&mut self, obs: &ObsView<'_>, goals: Option<GoalMarks<'_>>) {
         for i in 0..obs.num_envs() {
             self.push_env(obs, i, goals);
@@ -182,117 +186,177 @@ impl CellInput {
     /// Appends environment `i` of `obs` only.
     pub fn push_env(&mut self, obs: &ObsView<'_>, i: usize, goals: Option<GoalMarks<'_>>) {
         debug_assert_eq!((obs.width, obs.height), (self.width, self.height));
-        debug_assert_eq!(goals.is_some(), self.goal_channel);
         let hw = self.width * self.height;
-        let cells = obs.env_cells(i);
+        self.codes
+            .extend(obs.env_cells(i).iter().map(|&c| object_channel(c) as u8));
         let m = &obs.meta[i];
         let agent = m.y as usize * self.width + m.x as usize;
-        let agent_channel = OBJECT_CHANNELS + (m.dir as usize & 3);
-        let key = m.carrying == sim::Object::Key as u8;
-        let goal_cells: &[u32] = match goals {
-            Some(g) if self.goal_channel => g.of(i),
-            _ => &[],
-        };
-        self.indices.reserve(hw * (TAPS + 1));
-        for p in 0..hw {
-            self.offsets.push(self.indices.len() as i64);
-            for (tap, &q) in self.neighbours[p * TAPS..(p + 1) * TAPS].iter().enumerate() {
-                if q == u32::MAX {
-                    continue;
-                }
-                let q = q as usize;
-                self.indices
-                    .push((object_channel(cells[q]) * TAPS + tap) as i64);
-                if q == agent {
-                    self.indices.push((agent_channel * TAPS + tap) as i64);
-                }
-                if key {
-                    self.indices.push((KEY_CHANNEL * TAPS + tap) as i64);
-                }
-                if goal_cells.iter().any(|&g| g as usize == q) {
-                    self.indices.push((GOAL_CHANNEL * TAPS + tap) as i64);
-                }
+        self.agents.push((
+            if agent < hw { agent as u32 } else { u32::MAX },
+            m.dir & 3,
+        ));
+        self.keys.push(m.carrying == sim::Object::Key as u8);
+        if self.goal_channel {
+            let g = goals.map_or(&[][..], |g| g.of(i));
+            if self.len() == 1 {
+                self.slots = g.len().max(1);
+            }
+            for k in 0..self.slots {
+                self.goals.push(g.get(k).copied().unwrap_or(NO_GOAL));
             }
         }
-        self.len += 1;
     }
 
     /// Appends every observation of `other` (same grid and channels).
     pub fn extend_from(&mut self, other: &CellInput) {
-        debug_assert_eq!(
-            (self.width, self.height, self.goal_channel),
-            (other.width, other.height, other.goal_channel)
-        );
-        let shift = self.indices.len() as i64;
-        self.offsets.extend(other.offsets.iter().map(|o| o + shift));
-        self.indices.extend_from_slice(&other.indices);
-        self.len += other.len;
+        for k in 0..other.len() {
+            self.extend_one(other, k);
+        }
     }
 
     /// Appends observation `k` of `other` only.
     pub fn extend_one(&mut self, other: &CellInput, k: usize) {
         let hw = self.width * self.height;
-        let first = other.offsets[k * hw] as usize;
-        let end = other
-            .offsets
-            .get((k + 1) * hw)
-            .map_or(other.indices.len(), |&o| o as usize);
-        let shift = self.indices.len() as i64 - first as i64;
-        self.offsets.extend(
-            other.offsets[k * hw..(k + 1) * hw]
-                .iter()
-                .map(|o| o + shift),
-        );
-        self.indices.extend_from_slice(&other.indices[first..end]);
-        self.len += 1;
+        self.codes.extend_from_slice(&other.codes[k * hw..(k + 1) * hw]);
+        self.agents.push(other.agents[k]);
+        self.keys.push(other.keys[k]);
+        if self.goal_channel {
+            if self.is_empty() || self.slots == 0 {
+                self.slots = other.slots;
+            }
+            self.goals
+                .extend_from_slice(&other.goals[k * other.slots..(k + 1) * other.slots]);
+        }
     }
 
-    /// The bags as tensors `(indices, offsets)`.
-    fn tensors(&self) -> (Tensor, Tensor) {
-        (
-            Tensor::from_slice(&self.indices),
-            Tensor::from_slice(&self.offsets),
-        )
+    /// The dense one-hot planes `[N, C, H, W]` of the batch.
+    pub fn to_dense(&self) -> Tensor {
+        let (n, hw) = (self.len(), self.width * self.height);
+        let c = self.channels();
+        let mut buf = vec![0f32; n * c * hw];
+        for i in 0..n {
+            let base = i * c * hw;
+            for (j, &code) in self.codes[i * hw..(i + 1) * hw].iter().enumerate() {
+                buf[base + code as usize * hw + j] = 1.0;
+            }
+            let (agent, dir) = self.agents[i];
+            if agent != u32::MAX {
+                buf[base + (OBJECT_CHANNELS + dir as usize) * hw + agent as usize] = 1.0;
+            }
+            if self.keys[i] {
+                buf[base + KEY_CHANNEL * hw..base + (KEY_CHANNEL + 1) * hw].fill(1.0);
+            }
+            for &g in &self.goals[i * self.slots..(i + 1) * self.slots] {
+                if (g as usize) < hw {
+                    buf[base + GOAL_CHANNEL * hw + g as usize] = 1.0;
+                }
+            }
+        }
+        Tensor::from_slice(&buf).view([n as i64, c as i64, self.height as i64, self.width as i64])
+    }
+
+    /// The kernel tap offsets `(dy, dx)` in the order of a 3×3 kernel.
+    fn taps() -> impl Iterator<Item = (usize, i64, i64)> {
+        (0..TAPS).map(|k| (k, k as i64 / 3 - 1, k as i64 % 3 - 1))
     }
 }
 
-/// The first 3×3 convolution (stride 1, zero padding 1) applied to a
-/// [`CellInput`]: `[N, out, H, W]` (channels-last in memory), equal to
-/// `input.conv2d(weight, bias, 1, 1)` on the dense one-hot planes.
-///
-/// `weight` is the convolution's `[out, C, 3, 3]` kernel; its view as a
-/// `[C·9, out]` table keeps gradients flowing into it.
-pub fn first_conv(input: &CellInput, weight: &Tensor, bias: Option<&Tensor>) -> Tensor {
+/// The first 3×3 convolution (stride 1, zero padding 1) of a
+/// [`CellInput`], `[N, out, H, W]`, equal to `conv2d` over the dense
+/// one-hot planes; `weight` is the `[out, C, 3, 3]` kernel.
+pub fn first_conv(input: &CellInput, weight: &Tensor, bias: Option<&Tensor>, layer: FirstLayer) -> Tensor {
+    let (w, h) = (input.width, input.height);
+    let (n, hw) = (input.len(), w * h);
     let out = weight.size()[0];
-    let table = weight.permute([1, 2, 3, 0]).reshape([-1, out]);
-    let (indices, offsets) = input.tensors();
-    let (bags, _, _, _) =
-        Tensor::embedding_bag::<Tensor>(&table, &indices, &offsets, false, 0, false, None, false);
-    let y = bags
-        .view([
-            input.len as i64,
-            input.height as i64,
-            input.width as i64,
-            out,
-        ])
-        .permute([0, 3, 1, 2]);
+    let y = match layer {
+        FirstLayer::Dense => {
+            return input.to_dense().conv2d(weight, bias, [1, 1], [1, 1], [1, 1], 1);
+        }
+        FirstLayer::Gather => {
+            // Each position's 3×3 neighbourhood of object channels (10 for
+            // zero padding) and the key bit is a *pattern*; mazes have few.
+            // The object and key part of the convolution at a position is
+            // its pattern's row of `M · W`, `M` counting, per pattern, the
+            // table rows `channel · 9 + tap` that are 1 under the kernel.
+            let mut ids: std::collections::HashMap<u64, i64> = std::collections::HashMap::new();
+            let mut patterns: Vec<u64> = Vec::new();
+            let mut pid = vec![0i64; n * hw];
+            for i in 0..n {
+                let codes = &input.codes[i * hw..(i + 1) * hw];
+                let key = u64::from(input.keys[i]) << 40;
+                for y in 0..h as i64 {
+                    for x in 0..w as i64 {
+                        let mut p = key;
+                        for (k, dy, dx) in CellInput::taps() {
+                            let (qy, qx) = (y + dy, x + dx);
+                            let code = if (0..h as i64).contains(&qy) && (0..w as i64).contains(&qx) {
+                                u64::from(codes[(qy * w as i64 + qx) as usize])
+                            } else {
+                                PAD_CODE
+                            };
+                            p |= code << (4 * k);
+                        }
+                        let next = patterns.len() as i64;
+                        let id = *ids.entry(p).or_insert(next);
+                        if id == next {
+                            patterns.push(p);
+                        }
+                        pid[i * hw + (y * w as i64 + x) as usize] = id;
+                    }
+                }
+            }
+            let channels = weight.size()[1];
+            let rows = channels * TAPS as i64;
+            let mut m = vec![0f32; patterns.len() * rows as usize];
+            for (j, &p) in patterns.iter().enumerate() {
+                let key = p >> 40 & 1 == 1;
+                for k in 0..TAPS {
+                    let code = (p >> (4 * k)) & 0xF;
+                    if code != PAD_CODE {
+                        m[j * rows as usize + code as usize * TAPS + k] += 1.0;
+                        if key {
+                            m[j * rows as usize + KEY_CHANNEL * TAPS + k] += 1.0;
+                        }
+                    }
+                }
+            }
+            let table = weight.permute([1, 2, 3, 0]).reshape([rows, out]); // [C·9, out]
+            let m = Tensor::from_slice(&m).view([patterns.len() as i64, rows]).to_kind(weight.kind());
+            let mut y = m.matmul(&table).index_select(0, &Tensor::from_slice(&pid));
+            // The agent's and the goals' few positions: for every cell q
+            // they mark and every tap k with p = q − offset(k) inside.
+            let (mut pos, mut rows) = (Vec::new(), Vec::new());
+            let mut mark = |i: usize, q: u32, channel: usize| {
+                let (qy, qx) = ((q as usize / w) as i64, (q as usize % w) as i64);
+                for (k, dy, dx) in CellInput::taps() {
+                    let (py, px) = (qy - dy, qx - dx);
+                    if (0..h as i64).contains(&py) && (0..w as i64).contains(&px) {
+                        pos.push((i * hw) as i64 + py * w as i64 + px);
+                        rows.push((channel * TAPS + k) as i64);
+                    }
+                }
+            };
+            for i in 0..n {
+                let (agent, dir) = input.agents[i];
+                if agent != u32::MAX {
+                    mark(i, agent, OBJECT_CHANNELS + dir as usize);
+                }
+                for &g in &input.goals[i * input.slots..(i + 1) * input.slots] {
+                    if (g as usize) < hw {
+                        mark(i, g, GOAL_CHANNEL);
+                    }
+                }
+            }
+            if !pos.is_empty() {
+                let extra = table.index_select(0, &Tensor::from_slice(&rows));
+                y = y.index_add(0, &Tensor::from_slice(&pos), &extra);
+            }
+            y.view([n as i64, h as i64, w as i64, out]).permute([0, 3, 1, 2])
+        }
+    };
     match bias {
         Some(b) => y + b.view([1, out, 1, 1]),
         None => y,
-    }
-}
-
-/// Floats of a dense one-hot input of `n` observations (for FLOP counts).
-pub fn dense_input_floats(n: usize, channels: usize, width: usize, height: usize) -> usize {
-    n * channels * width * height
-}
-
-/// Mean bag size of a batch (table rows summed per output position).
-pub fn mean_bag(input: &CellInput) -> f64 {
-    if input.offsets.is_empty() {
-        0.0
-    } else {
-        input.indices.len() as f64 / input.offsets.len() as f64
     }
 }
 
@@ -382,13 +446,14 @@ mod tests {
             );
             (&dense * &upstream).sum(Kind::Float).backward();
             let (gw_dense, gb_dense) = (weight.grad().copy(), bias.grad().copy());
-            weight.grad().zero_();
-            bias.grad().zero_();
+            let _ = weight.grad().zero_();
+            let _ = bias.grad().zero_();
 
             let mut input = CellInput::new(w, h, goals.is_some());
             input.push_obs(&obs, goals);
             assert_eq!(input.len(), n);
-            let fast = first_conv(&input, &weight, Some(&bias));
+            assert!(input.to_dense().to_kind(Kind::Double).equal(&encode_obs(&obs, goals).to_kind(Kind::Double)));
+            let fast = first_conv(&input, &weight, Some(&bias), FirstLayer::Gather);
             (&fast * &upstream).sum(Kind::Float).backward();
             let (gw_fast, gb_fast) = (weight.grad().copy(), bias.grad().copy());
 
@@ -408,8 +473,6 @@ mod tests {
                 diff(&gb_fast, &gb_dense) < 1e-5,
                 "{w}×{h}: bias gradients differ"
             );
-            // Far fewer table rows than dense multiply-adds per position.
-            assert!(mean_bag(&input) < 12.0, "{}", mean_bag(&input));
         }
     }
 
@@ -438,9 +501,7 @@ mod tests {
         for i in 0..n {
             picked.extend_one(&whole, i);
         }
-        assert_eq!(parts.indices, whole.indices);
-        assert_eq!(parts.offsets, whole.offsets);
-        assert_eq!(picked.indices, whole.indices);
-        assert_eq!(picked.offsets, whole.offsets);
+        assert!(parts.to_dense().equal(&whole.to_dense()));
+        assert!(picked.to_dense().equal(&whole.to_dense()));
     }
 }

@@ -22,7 +22,10 @@
 
 pub mod input;
 pub mod net;
+pub mod optim;
 pub mod rollout;
+
+use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use tch::{Kind, Tensor};
@@ -101,6 +104,46 @@ impl A2cConfig {
             }
         }
         Ok(())
+    }
+}
+
+/// Where a learner's time goes, in seconds, accumulated over iterations
+/// (read by `worldgraph bench learner`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct PhaseTimes {
+    /// Stepping the environments.
+    pub step: f64,
+    /// Encoding observations into network inputs.
+    pub encode: f64,
+    /// The acting forward passes.
+    pub act: f64,
+    /// The update's forward pass and loss (the recomputation, or the loss
+    /// over kept graphs).
+    pub loss: f64,
+    /// Backward pass and optimiser step.
+    pub backward: f64,
+}
+
+impl PhaseTimes {
+    /// Sum of the phases.
+    pub fn total(&self) -> f64 {
+        self.step + self.encode + self.act + self.loss + self.backward
+    }
+
+    /// Adds the seconds since `since` to one phase, returns now.
+    pub fn lap(slot: &mut f64, since: Instant) -> Instant {
+        let now = Instant::now();
+        *slot += (now - since).as_secs_f64();
+        now
+    }
+
+    /// Adds another record.
+    pub fn add(&mut self, o: &PhaseTimes) {
+        self.step += o.step;
+        self.encode += o.encode;
+        self.act += o.act;
+        self.loss += o.loss;
+        self.backward += o.backward;
     }
 }
 

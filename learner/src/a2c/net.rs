@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use tch::nn::{self, Module};
 use tch::{Device, Kind, Tensor};
 
-use super::input::{BASE_CHANNELS, CellInput, first_conv};
+use super::input::{BASE_CHANNELS, CellInput, FirstLayer, first_conv};
 
 /// Sizes of an actor-critic (CPU-sized defaults).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -200,6 +200,11 @@ impl Trunk {
         }
     }
 
+    /// The first convolution's kernel `[out, C, 3, 3]`.
+    pub fn conv1_weight(&self) -> Tensor {
+        self.conv1.ws.shallow_clone()
+    }
+
     /// Width of the features and of the core.
     pub fn hidden(&self) -> i64 {
         self.hidden
@@ -231,7 +236,12 @@ impl Trunk {
 
     /// Encoder features `[N, hidden]` of a [`CellInput`] (the fast path).
     pub fn features(&self, input: &CellInput) -> Tensor {
-        self.after_conv1(first_conv(input, &self.conv1.ws, self.conv1.bs.as_ref()))
+        self.after_conv1(first_conv(
+            input,
+            &self.conv1.ws,
+            self.conv1.bs.as_ref(),
+            first_layer(),
+        ))
     }
 
     /// Encoder features `[N, hidden]` of dense one-hot planes `[N, C, H, W]`
@@ -255,19 +265,38 @@ impl Trunk {
         init: &LstmState,
         reset_before: &Tensor,
     ) -> (Tensor, LstmState) {
+        let (hs, cs) = self.unroll_states(features, init, reset_before);
+        let last = hs.size()[0] - 1;
+        let state = LstmState {
+            h: hs.get(last),
+            c: cs.get(last),
+        };
+        (hs, state)
+    }
+
+    /// [`Self::unroll`] with the cell states too: `(h, c)`, `[K, B, hidden]`
+    /// each, the state after every step.
+    pub fn unroll_states(
+        &self,
+        features: &Tensor,
+        init: &LstmState,
+        reset_before: &Tensor,
+    ) -> (Tensor, Tensor) {
         let steps = features.size()[0];
         let mut state = LstmState {
             h: init.h.shallow_clone(),
             c: init.c.shallow_clone(),
         };
         let mut hs = Vec::with_capacity(steps as usize);
+        let mut cs = Vec::with_capacity(steps as usize);
         for k in 0..steps {
             state = self
                 .core
                 .step(&features.get(k), &state.reset_done(&reset_before.get(k)));
             hs.push(state.h.shallow_clone());
+            cs.push(state.c.shallow_clone());
         }
-        (Tensor::stack(&hs, 0), state)
+        (Tensor::stack(&hs, 0), Tensor::stack(&cs, 0))
     }
 }
 
@@ -360,6 +389,60 @@ impl ActorCritic {
             logits,
             value,
             state,
+        }
+    }
+}
+
+/// The first layer's implementation: [`FirstLayer::Gather`], or dense when
+/// `WORLDGRAPH_FIRST_LAYER=dense` (for measurements).
+pub fn first_layer() -> FirstLayer {
+    static LAYER: std::sync::OnceLock<FirstLayer> = std::sync::OnceLock::new();
+    *LAYER.get_or_init(|| match std::env::var("WORLDGRAPH_FIRST_LAYER").as_deref() {
+        Ok("dense") => FirstLayer::Dense,
+        _ => FirstLayer::Gather,
+    })
+}
+
+/// Multiply-adds of one trunk forward pass per observation, by layer:
+/// `(first convolution dense, rest)`; with `bag` (mean table rows per
+/// output position) the first convolution's fast-path additions instead.
+pub fn trunk_macs(trunk: &Trunk, bag: Option<f64>) -> (f64, f64) {
+    let (w, h) = trunk.grid();
+    let hw = (w * h) as f64;
+    let [c1, c2] = [trunk.conv1.ws.size()[0] as f64, trunk.conv2.ws.size()[0] as f64];
+    let cin = trunk.in_channels as f64;
+    let hw2 = (((w + 1) / 2) * ((h + 1) / 2)) as f64;
+    let hidden = trunk.hidden as f64;
+    let conv1 = match bag {
+        Some(b) => hw * c1 * b / 2.0,
+        None => hw * c1 * cin * 9.0,
+    };
+    let conv2 = hw2 * c2 * c1 * 9.0;
+    let fc = c2 * hw2 * hidden;
+    let lstm = 4.0 * hidden * 2.0 * hidden;
+    (conv1, conv2 + fc + lstm)
+}
+
+/// Model FLOPs per env-step of an every-step learner with `heads` outputs
+/// (policy + value): on the recompute path the acting forward, the update's
+/// forward and the backward pass (twice the forward, except the first
+/// convolution, which needs no input gradient); on the per-step path one
+/// forward with its backward. Table rows of the fast first layer count one
+/// FLOP each (an addition), a multiply-add two.
+pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: super::rollout::GradPath) -> f64 {
+    let heads = trunk.hidden as f64 * (num_actions as f64 + 1.0);
+    match path {
+        super::rollout::GradPath::Recompute => {
+            // Ten table rows per position (nine taps, and the agent's,
+            // goals' and key's few).
+            let (c1, rest) = trunk_macs(trunk, Some(10.0));
+            let fwd = 2.0 * (c1 + rest + heads);
+            2.0 * fwd + 2.0 * c1 + 4.0 * (rest + heads)
+        }
+        super::rollout::GradPath::PerStep => {
+            let (c1, rest) = trunk_macs(trunk, None);
+            let fwd = 2.0 * (c1 + rest + heads);
+            fwd + 2.0 * c1 + 4.0 * (rest + heads)
         }
     }
 }

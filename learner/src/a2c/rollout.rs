@@ -23,7 +23,7 @@ use tch::{Kind, Tensor, nn};
 
 use super::input::{CellInput, GoalMarks, encode_obs};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
-use super::{A2cConfig, Categorical, LossFigures, PolicyTerms, a2c_loss, advantages};
+use super::{A2cConfig, Categorical, LossFigures, PhaseTimes, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
 
 /// How the update gets its gradients (module docs).
@@ -62,6 +62,9 @@ pub struct Rollout {
     pub bootstrap: Vec<f32>,
     /// The core state before the first step.
     init_state: Option<LstmState>,
+    /// Time spent encoding, acting and updating (the caller adds its own
+    /// stepping time).
+    pub times: PhaseTimes,
 }
 
 impl Rollout {
@@ -87,6 +90,7 @@ impl Rollout {
             weights: Vec::new(),
             bootstrap: Vec::new(),
             init_state: None,
+            times: PhaseTimes::default(),
         }
     }
 
@@ -126,20 +130,24 @@ impl Rollout {
         goals: Option<GoalMarks<'_>>,
         state: &LstmState,
     ) -> ActorCriticOutput {
+        let t0 = std::time::Instant::now();
         match self.path {
             GradPath::Recompute => {
                 let mut input = CellInput::new(obs.width, obs.height, goals.is_some());
                 input.push_obs(obs, goals);
-                let out = tch::no_grad(|| net.step(&input, state));
                 self.inputs.extend_from(&input);
-                self.values
-                    .extend(Vec::<f32>::try_from(&out.value).unwrap_or_default());
+                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
+                let out = tch::no_grad(|| net.step(&input, state));
+                self.values.extend(floats(&out.value));
+                PhaseTimes::lap(&mut self.times.act, t1);
                 out
             }
             GradPath::PerStep => {
-                let out = net.forward(&encode_obs(obs, goals), state);
-                self.values
-                    .extend(Vec::<f32>::try_from(&out.value.detach()).unwrap_or_default());
+                let x = encode_obs(obs, goals);
+                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
+                let out = net.forward(&x, state);
+                self.values.extend(floats(&out.value.detach()));
+                PhaseTimes::lap(&mut self.times.act, t1);
                 self.graph_logits.push(out.logits.shallow_clone());
                 self.graph_values.push(out.value.shallow_clone());
                 ActorCriticOutput {
@@ -214,13 +222,16 @@ impl Rollout {
 
     /// The update: [`Self::loss`], then one clipped Adam step.
     pub fn update(
-        &self,
+        &mut self,
         net: &ActorCritic,
         opt: &mut nn::Optimizer,
         cfg: &A2cConfig,
     ) -> LossFigures {
+        let t0 = std::time::Instant::now();
         let (loss, figures) = self.loss(net, cfg);
+        let t1 = PhaseTimes::lap(&mut self.times.loss, t0);
         opt.backward_step_clip_norm(&loss, cfg.grad_clip_norm);
+        PhaseTimes::lap(&mut self.times.backward, t1);
         figures
     }
 }
@@ -235,8 +246,13 @@ pub fn bootstrap_values(
 ) -> Vec<f32> {
     let mut input = CellInput::new(obs.width, obs.height, goals.is_some());
     input.push_obs(obs, goals);
-    let value = tch::no_grad(|| net.step(&input, state).value);
-    Vec::<f32>::try_from(&value).unwrap_or_default()
+    floats(&tch::no_grad(|| net.step(&input, state).value))
+}
+
+/// The values of a float tensor.
+pub fn floats(t: &Tensor) -> Vec<f32> {
+    Vec::<f32>::try_from(&t.to_kind(Kind::Float).contiguous().flatten(0, -1))
+        .expect("invariant: a float tensor converts to Vec<f32>")
 }
 
 #[cfg(test)]
@@ -306,7 +322,7 @@ mod tests {
             let rollout = fill(path, &net, &layout, 12, 9);
             for v in vs.trainable_variables() {
                 if v.grad().defined() {
-                    v.grad().zero_();
+                    let _ = v.grad().zero_();
                 }
             }
             let (loss, figures) = rollout.loss(&net, &cfg);

@@ -1,0 +1,301 @@
+//! The Feudal Manager (Shang et al. 2019, section 4.1; FeUdal Networks,
+//! Vezhnevets et al. 2017, in the paper's fully observed form).
+//!
+//! "The Manager receives rewards from the environment and the Worker
+//! receives rewards from the Manager by reaching its subgoals. The high and
+//! low-level policy models are distinct and operate at different temporal
+//! resolutions: the Manager only outputs a new subgoal if either Worker
+//! completes its current one or the subgoal horizon `c` is exceeded." In a
+//! fully observed maze "the Manager policy can emit a probability vector of
+//! dimension `|S|`": a softmax over every valid cell, walls masked
+//! ([`ManagerHead::Feudal`]). The Wide-then-Narrow Manager of section 4.2 is
+//! the same Manager with the head of [`crate::hrl::wide_narrow`].
+//!
+//! ## The Manager's own time scale
+//! A Manager *decision* is taken at the start of an episode and whenever
+//! its interval ends; its reward is the task's rewards summed over the `k`
+//! steps of the interval, and its transition is discounted by `γ^k`
+//! ([`interval_transition`]). The Manager's core steps once per decision.
+//! Decisions are kept per environment ([`DecisionQueue`]); an interval
+//! still running at the end of a rollout is trained in the next one: the
+//! queue carries it over together with the core state before it, so every
+//! decision is trained exactly once with the gradient of the step it was
+//! taken in ([`Manager::loss`]).
+
+use tch::nn::{self, Module};
+use tch::{Kind, Tensor};
+
+use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead};
+use crate::a2c::input::CellInput;
+use crate::a2c::net::{LstmState, Trunk};
+use crate::a2c::rollout::floats;
+use crate::a2c::{A2cConfig, Categorical, LossFigures, PolicyTerms, a2c_loss, advantages};
+
+/// The reward and discount of one Manager transition: the task rewards of
+/// the interval summed, `γ^k` over its `k` steps, 0 where the interval
+/// ended the episode.
+pub fn interval_transition(rewards: &[f32], gamma: f64, episode_ended: bool) -> (f32, f32) {
+    let sum: f32 = rewards.iter().sum();
+    let discount = if episode_ended {
+        0.0
+    } else {
+        gamma.powi(rewards.len() as i32) as f32
+    };
+    (sum, discount)
+}
+
+/// The Manager's goal head.
+#[derive(Debug)]
+pub enum ManagerHead {
+    /// FN: one subgoal cell, a softmax over the grid with invalid cells
+    /// masked.
+    Feudal {
+        /// Logits over the `H·W` cells.
+        cells: nn::Linear,
+        /// `[H·W]` valid subgoal cells.
+        valid: Tensor,
+    },
+    /// WN: a wide goal from `V`, then a narrow goal in its window.
+    WideNarrow(WideNarrowHead),
+}
+
+/// One Manager decision and its interval.
+#[derive(Debug, Clone)]
+pub struct Decision {
+    /// The observation it was taken on (one observation).
+    pub input: CellInput,
+    /// FN: the subgoal cell; WN: the index of `g_w` in `V`.
+    pub wide: i64,
+    /// WN: the window slot of `g_n` (0 for FN).
+    pub narrow: i64,
+    /// WN: the local input `s_w(g_w)` and the valid slots of the window.
+    pub local: Vec<f32>,
+    /// WN: valid narrow slots.
+    pub valid: Vec<bool>,
+    /// `V(s)` when it was taken.
+    pub value: f32,
+    /// The core was reset before this decision (first of an episode).
+    pub reset_before: bool,
+    /// Task rewards of the interval so far.
+    pub rewards: Vec<f32>,
+    /// The interval is over.
+    pub complete: bool,
+    /// The interval ended the episode.
+    pub episode_ended: bool,
+}
+
+/// One environment's decisions not yet trained, oldest first, and the
+/// Manager's core state before the first of them.
+#[derive(Debug)]
+pub struct DecisionQueue {
+    /// The decisions; the last one is the interval under way.
+    pub decisions: Vec<Decision>,
+}
+
+/// The Manager: a trunk without goal channel, a value head and a goal head.
+#[derive(Debug)]
+pub struct Manager {
+    trunk: Trunk,
+    value: nn::Linear,
+    head: ManagerHead,
+    hidden: i64,
+}
+
+impl Manager {
+    /// A Manager under `p` (`encoder`, `core`, `value`, `head/...`).
+    pub fn new(p: &nn::Path, trunk: Trunk, head: impl FnOnce(&nn::Path, i64) -> ManagerHead) -> Manager {
+        let hidden = trunk.hidden();
+        let value = nn::linear(p / "value", hidden, 1, Default::default());
+        let head = head(&(p / "head"), hidden);
+        Manager {
+            trunk,
+            value,
+            head,
+            hidden,
+        }
+    }
+
+    /// The FN head over a `width × height` grid with `valid` subgoal cells.
+    pub fn feudal_head(p: &nn::Path, hidden: i64, valid: &[bool]) -> ManagerHead {
+        ManagerHead::Feudal {
+            cells: nn::linear(p / "cells", hidden, valid.len() as i64, Default::default()),
+            valid: Tensor::from_slice(valid),
+        }
+    }
+
+    /// The trunk.
+    pub fn trunk(&self) -> &Trunk {
+        &self.trunk
+    }
+
+    /// The goal head.
+    pub fn head(&self) -> &ManagerHead {
+        &self.head
+    }
+
+    /// Zero core state.
+    pub fn zero_state(&self, batch: i64) -> LstmState {
+        self.trunk.zero_state(batch)
+    }
+
+    /// One acting step (no gradient) on `input` (`S` observations) from
+    /// `state` (`[S, hidden]`): the next state, the values and the core
+    /// outputs.
+    pub fn act(&self, input: &CellInput, state: &LstmState) -> (LstmState, Vec<f32>, Tensor) {
+        tch::no_grad(|| {
+            let next = self.trunk.step(&self.trunk.features(input), state);
+            let v = self.value.forward(&next.h).squeeze_dim(-1);
+            let h = next.h.shallow_clone();
+            (next, floats(&v), h)
+        })
+    }
+
+    /// FN: the subgoal distribution of core outputs `h`.
+    pub fn feudal_policy(&self, h: &Tensor) -> Option<Categorical> {
+        match &self.head {
+            ManagerHead::Feudal { cells, valid } => {
+                let n = h.size()[0];
+                let mask = valid.view([1, -1]).expand([n, -1], false);
+                Some(Categorical::new(&cells.forward(h), Some(&mask)))
+            }
+            ManagerHead::WideNarrow(_) => None,
+        }
+    }
+
+    /// The A2C loss of the trainable decisions of `queues` (every complete
+    /// one; the interval under way only bootstraps), unrolling the core over
+    /// each environment's decisions from `init`. Returns the loss, its
+    /// figures, and each environment's core state before its interval
+    /// under way (the next `init`).
+    pub fn loss(
+        &self,
+        queues: &[DecisionQueue],
+        init: &LstmState,
+        cfg: &A2cConfig,
+        gamma: f64,
+    ) -> (Tensor, LossFigures, LstmState) {
+        let b = queues.len();
+        let k_max = queues.iter().map(|q| q.decisions.len()).max().unwrap_or(0).max(1);
+        let template = &queues
+            .iter()
+            .find_map(|q| q.decisions.first())
+            .expect("invariant: every environment has an interval under way")
+            .input;
+        let mut input = CellInput::new(template_grid(template).0, template_grid(template).1, false);
+        let n = k_max * b;
+        let (mut reset, mut rewards, mut discounts, mut values, mut weights) = (
+            vec![0f32; n],
+            vec![0f32; n],
+            vec![0f32; n],
+            vec![0f32; n],
+            vec![0f32; n],
+        );
+        let (mut wide, mut narrow) = (vec![0i64; n], vec![0i64; n]);
+        let window = match &self.head {
+            ManagerHead::WideNarrow(h) => h.window_len(),
+            ManagerHead::Feudal { .. } => 0,
+        };
+        let mut local = vec![0f32; n * window * WINDOW_CHANNELS];
+        let mut valid = vec![true; n * window];
+        for k in 0..k_max {
+            for (e, q) in queues.iter().enumerate() {
+                let i = k * b + e;
+                let d = q.decisions.get(k).unwrap_or_else(|| q.decisions.last().expect("non-empty"));
+                input.extend_one(&d.input, 0);
+                if k >= q.decisions.len() {
+                    continue;
+                }
+                reset[i] = f32::from(u8::from(d.reset_before));
+                values[i] = d.value;
+                wide[i] = d.wide;
+                narrow[i] = d.narrow;
+                if window > 0 {
+                    local[i * window * WINDOW_CHANNELS..(i + 1) * window * WINDOW_CHANNELS]
+                        .copy_from_slice(&d.local);
+                    valid[i * window..(i + 1) * window].copy_from_slice(&d.valid);
+                }
+                if d.complete {
+                    let (r, disc) = interval_transition(&d.rewards, gamma, d.episode_ended);
+                    rewards[i] = r;
+                    discounts[i] = disc;
+                    weights[i] = 1.0;
+                }
+            }
+        }
+        let (k, bb) = (k_max as i64, b as i64);
+        let features = self.trunk.features(&input).view([k, bb, -1]);
+        let (hs, cs) = self
+            .trunk
+            .unroll_states(&features, init, &Tensor::from_slice(&reset).view([k, bb]));
+        let h = hs.view([k * bb, self.hidden]);
+        let value = self.value.forward(&h).squeeze_dim(-1);
+        let (log_prob, entropy) = match &self.head {
+            ManagerHead::Feudal { .. } => {
+                let pi = self.feudal_policy(&h).expect("feudal head");
+                (pi.log_prob(&Tensor::from_slice(&wide)), pi.entropy())
+            }
+            ManagerHead::WideNarrow(head) => head.terms(
+                &h,
+                &Tensor::from_slice(&local).view([k * bb, -1]),
+                &Tensor::from_slice(&valid).view([k * bb, -1]),
+                &Tensor::from_slice(&wide),
+                &Tensor::from_slice(&narrow),
+            ),
+        };
+        let (adv, ret) = advantages(&rewards, &values, &discounts, &vec![0f32; b], cfg.gae_lambda as f32);
+        let terms = PolicyTerms {
+            log_prob,
+            entropy,
+            value: value.to_kind(Kind::Float),
+        };
+        let (loss, figures) = a2c_loss(&terms, &adv, &ret, &weights, cfg);
+        // The state before each environment's interval under way.
+        let mut next_h = Vec::with_capacity(b);
+        let mut next_c = Vec::with_capacity(b);
+        for (e, q) in queues.iter().enumerate() {
+            let len = q.decisions.len();
+            if len >= 2 {
+                next_h.push(hs.get((len - 2) as i64).get(e as i64).detach());
+                next_c.push(cs.get((len - 2) as i64).get(e as i64).detach());
+            } else {
+                next_h.push(init.h.get(e as i64).detach());
+                next_c.push(init.c.get(e as i64).detach());
+            }
+        }
+        let next = LstmState {
+            h: Tensor::stack(&next_h, 0),
+            c: Tensor::stack(&next_c, 0),
+        };
+        (loss, figures, next)
+    }
+}
+
+fn template_grid(input: &CellInput) -> (usize, usize) {
+    input.grid()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interval_returns_equal_the_closed_form() {
+        // A hand-made interval of 4 steps: three step penalties and a ball.
+        let rewards = [-0.01f32, -0.01, 0.99, -0.01];
+        let (r, d) = interval_transition(&rewards, 0.9, false);
+        assert!((r - 0.96).abs() < 1e-6);
+        assert!((d - 0.9f32.powi(4)).abs() < 1e-7);
+        // The Manager's advantage over two intervals: Â_0 = r_0 + γ^4 V_1 −
+        // V_0 + γ^4 λ (r_1 + γ^2 · 0 − V_1) with the second ending the
+        // episode after 2 steps.
+        let (r1, d1) = interval_transition(&[0.5, 1.0], 0.9, true);
+        assert_eq!(d1, 0.0);
+        let (v0, v1, lambda) = (0.3f32, 0.7f32, 0.95f32);
+        let (adv, ret) = advantages(&[r, r1], &[v0, v1], &[d, d1], &[0.0], lambda);
+        let a1 = r1 - v1;
+        let a0 = r + d * v1 - v0 + d * lambda * a1;
+        assert!((adv[1] - a1).abs() < 1e-6);
+        assert!((adv[0] - a0).abs() < 1e-6);
+        assert!((ret[0] - (a0 + v0)).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,110 @@
+//! Initialisation from the goal-conditioned policy `π_g` (Shang et al.
+//! 2019, section 4.4 / Control Experiments: "we test initializing the
+//! Manager and Worker with the weights of `π_g`").
+//!
+//! The Worker has `π_g`'s architecture (a goal channel, the same trunk), so
+//! its encoder, core and heads start as copies of `π_g`'s. The Manager
+//! shares the encoder's shape: its encoder starts from `π_g`'s, without the
+//! goal channel's input weights (the Manager's input has none). Where a
+//! tensor's shape differs only in size along some dimensions (a Door-Key
+//! Worker has six actions where `π_g` had three; the Manager's first
+//! convolution has one input plane fewer), the overlapping block is copied
+//! and the rest keeps its fresh initialisation.
+
+use tch::{Tensor, nn};
+
+/// What an initialisation copied.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct InitReport {
+    /// Tensors copied whole.
+    pub copied: Vec<String>,
+    /// Tensors of which the overlapping block was copied.
+    pub partial: Vec<String>,
+}
+
+/// Copies `src`'s variables whose names start with one of `prefixes` into
+/// the variables of the same name in `dst` (module docs).
+pub fn copy_from(src: &nn::VarStore, dst: &nn::VarStore, prefixes: &[&str]) -> InitReport {
+    let from = src.variables();
+    let mut report = InitReport::default();
+    let mut names: Vec<(String, Tensor)> = dst.variables().into_iter().collect();
+    names.sort_by(|a, b| a.0.cmp(&b.0));
+    tch::no_grad(|| {
+        for (name, mut to) in names {
+            if !prefixes.iter().any(|p| name.starts_with(p)) {
+                continue;
+            }
+            let Some(src_t) = from.get(&name) else {
+                continue;
+            };
+            let (a, b) = (src_t.size(), to.size());
+            if a == b {
+                to.copy_(src_t);
+                report.copied.push(name);
+            } else if a.len() == b.len() {
+                let mut s = src_t.shallow_clone();
+                let mut d = to.shallow_clone();
+                for (dim, (&x, &y)) in a.iter().zip(&b).enumerate() {
+                    let n = x.min(y);
+                    s = s.narrow(dim as i64, 0, n);
+                    d = d.narrow(dim as i64, 0, n);
+                }
+                d.copy_(&s);
+                report.partial.push(name);
+            }
+        }
+    });
+    report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::a2c::net::{ActorCritic, ActorCriticConfig, Trunk};
+    use tch::Device;
+
+    #[test]
+    fn initialisation_copies_the_tensors_exactly() {
+        let (w, h) = (13, 13);
+        let src = nn::VarStore::new(Device::Cpu);
+        let gcp_cfg = ActorCriticConfig {
+            conv_channels: [4, 8],
+            hidden: 16,
+            num_actions: 3,
+            goal_channel: true,
+        };
+        let _gcp = crate::seeding::init_seeded(1, || ActorCritic::new(&src.root(), &gcp_cfg, w, h));
+        // A Door-Key Worker: six actions.
+        let worker_vs = nn::VarStore::new(Device::Cpu);
+        let worker_cfg = ActorCriticConfig {
+            num_actions: 6,
+            ..gcp_cfg.clone()
+        };
+        let _worker = crate::seeding::init_seeded(2, || ActorCritic::new(&worker_vs.root(), &worker_cfg, w, h));
+        let report = copy_from(&src, &worker_vs, &["encoder", "core", "policy", "value"]);
+        let s = src.variables();
+        let d = worker_vs.variables();
+        for name in &report.copied {
+            assert!(s[name].equal(&d[name]), "{name} not copied exactly");
+        }
+        assert_eq!(report.partial, vec!["policy.bias".to_string(), "policy.weight".to_string()]);
+        assert!(d["policy.weight"].narrow(0, 0, 3).equal(&s["policy.weight"]));
+        assert!(!d["policy.weight"].narrow(0, 3, 3).equal(&Tensor::zeros([3, 16], (tch::Kind::Float, Device::Cpu))));
+        assert_eq!(report.copied.len() + report.partial.len(), d.len());
+
+        // A Manager trunk without the goal channel: the encoder is copied,
+        // the first convolution without its goal plane; the core is not.
+        let manager_vs = nn::VarStore::new(Device::Cpu);
+        let _m = Trunk::new(&manager_vs.root(), gcp_cfg.in_channels() - 1, [4, 8], 16, w, h);
+        let before = manager_vs.variables()["core.weight_ih_l0"].copy();
+        let report = copy_from(&src, &manager_vs, &["encoder"]);
+        let d = manager_vs.variables();
+        assert_eq!(report.partial, vec!["encoder.conv1.weight".to_string()]);
+        let planes = gcp_cfg.in_channels() - 1;
+        assert!(d["encoder.conv1.weight"].equal(&s["encoder.conv1.weight"].narrow(1, 0, planes)));
+        for name in ["encoder.conv2.weight", "encoder.fc.weight", "encoder.fc.bias"] {
+            assert!(d[name].equal(&s[name]), "{name}");
+        }
+        assert!(d["core.weight_ih_l0"].equal(&before), "the Manager's core is its own");
+    }
+}

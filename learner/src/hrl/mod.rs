@@ -1,0 +1,1073 @@
+//! Stage 2 of Shang et al. 2019 (section 4): agents that solve the maze
+//! tasks with the world graph of stage 1.
+//!
+//! - [`a2c`]: the A2C-LSTM baseline (section 4.1);
+//! - [`feudal`]: the Feudal Manager on its own time scale (section 4.1);
+//! - [`worker`]: the goal-conditioned Worker and its reward;
+//! - [`wide_narrow`]: Wide-then-Narrow Manager instructions (section 4.2);
+//! - [`traversal`]: world graph traversal (section 4.3);
+//! - [`init`]: initialisation from `π_g` (section 5, Control Experiments).
+//!
+//! [`HrlAgent`] runs one of them on a [`BatchEnvironment`]: `A2C`, `FN`
+//! (Manager over every valid cell) or `WN` (wide goals from `V_all`,
+//! `V_rand` or `V_p`), each optionally initialised from `π_g`, WN
+//! optionally with traversal. Training is the A2C core's
+//! ([`crate::a2c`]): the Worker (or the baseline) learns from `[T, B]`
+//! rollouts, the Manager from its decision queues.
+//!
+//! Training runs in *segments* ([`HrlAgent::start_segment`]): a segment
+//! starts from fresh episodes and RNGs seeded by `(seed, segment)`, so a
+//! run checkpointed between segments resumes exactly.
+
+pub mod a2c;
+pub mod feudal;
+pub mod init;
+pub mod traversal;
+pub mod wide_narrow;
+pub mod worker;
+
+use std::path::Path;
+
+use planner::{Route, WorldGraph};
+use rand::SeedableRng;
+use rand::rngs::SmallRng;
+use serde::{Deserialize, Serialize};
+use shm_schemas::EnvMeta;
+use sim::{Layout, Task, action};
+use tch::{Device, Tensor, nn};
+
+use crate::a2c::input::{CellInput, GoalMarks, NO_GOAL, mask};
+use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState, Trunk};
+use crate::a2c::optim::Adam;
+use crate::a2c::rollout::{GradPath, Rollout, bootstrap_values};
+use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
+use crate::batch_env::{BatchEnvironment, ObsView};
+use crate::error::{ConfigError, LearnerError};
+use crate::gcp::GoalConditionedPolicy;
+use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
+use traversal::{Execution, Progress, Traversal};
+use wide_narrow::{Window, WideNarrowHead};
+use worker::WorkerGoal;
+
+/// Which agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AgentKind {
+    /// The A2C-LSTM baseline.
+    A2c,
+    /// The Feudal Network: Manager over every valid cell, Worker.
+    Feudal,
+    /// Wide-then-Narrow Manager, Worker.
+    WideNarrow,
+}
+
+/// The candidate set `V` of wide goals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Candidates {
+    /// `V_all`: every valid cell.
+    All,
+    /// `V_rand`: random cells, as many as `V_p`.
+    Random,
+    /// `V_p`: the pivotal states of a discovery run.
+    Pivotal,
+}
+
+/// Settings of a stage 2 agent. Sizes default to `π_g`'s (the paper
+/// "inherit[s] most hyperparameters from the training of `π_g`"; the
+/// Manager and the Worker "share similar model architecture").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AgentConfig {
+    /// The agent.
+    pub kind: AgentKind,
+    /// Wide-goal candidates (WN).
+    pub candidates: Candidates,
+    /// World graph traversal (WN over `V_rand` or `V_p`).
+    pub traversal: bool,
+    /// Initialise the Manager's and the Worker's encoders (and the Worker's
+    /// core and heads) from `π_g`.
+    pub init_from_gcp: bool,
+    /// Environments per update (the paper: 32 agents).
+    pub envs: usize,
+    /// Rollout length `T` per update.
+    pub rollout_len: usize,
+    /// Manager horizon `c` in Worker steps; 0: a third of the rollout (the
+    /// paper's choice).
+    pub horizon: usize,
+    /// Side `N` of the narrow window; 0: 5 on grids up to 25 cells wide, 7
+    /// beyond (the paper: 5×5 small and medium, 7×7 large).
+    pub window: usize,
+    /// Output channels of the encoder's convolutions.
+    pub conv_channels: [i64; 2],
+    /// Width of the encoder output and the LSTM core.
+    pub hidden: i64,
+    /// The Worker's (and the baseline's) A2C.
+    pub worker: A2cConfig,
+    /// The Manager's A2C (`γ` per environment step; an interval of `k`
+    /// steps is discounted by `γ^k`).
+    pub manager: A2cConfig,
+    /// The Worker's reward for reaching a goal.
+    pub goal_reward: f32,
+    /// The Worker's reward per step.
+    pub step_penalty: f32,
+}
+
+impl Default for AgentConfig {
+    fn default() -> Self {
+        AgentConfig {
+            kind: AgentKind::WideNarrow,
+            candidates: Candidates::Pivotal,
+            traversal: false,
+            init_from_gcp: false,
+            envs: 32,
+            rollout_len: 60,
+            horizon: 0,
+            window: 0,
+            conv_channels: [16, 32],
+            hidden: 64,
+            worker: A2cConfig::default(),
+            manager: A2cConfig::default(),
+            goal_reward: 1.0,
+            step_penalty: -0.01,
+        }
+    }
+}
+
+impl AgentConfig {
+    /// Checks every value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.envs == 0 {
+            return Err(ConfigError::new("envs", "must be at least 1"));
+        }
+        if self.rollout_len == 0 {
+            return Err(ConfigError::new("rollout_len", "must be at least 1"));
+        }
+        if self.window != 0 && self.window % 2 == 0 {
+            return Err(ConfigError::new("window", format!("{} must be odd", self.window)));
+        }
+        if self.conv_channels.iter().any(|&c| c < 1) || self.hidden < 1 {
+            return Err(ConfigError::new("hidden", "network sizes must be ≥ 1"));
+        }
+        if !self.goal_reward.is_finite() || !self.step_penalty.is_finite() {
+            return Err(ConfigError::new("goal_reward", "rewards must be finite"));
+        }
+        self.worker.validate("worker")?;
+        self.manager.validate("manager")?;
+        if self.traversal && !(self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All) {
+            return Err(ConfigError::new(
+                "traversal",
+                "needs the Wide-then-Narrow agent over V_rand or V_p (the graph of V_all is trivial)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The Manager horizon `c`.
+    pub fn horizon(&self) -> u32 {
+        if self.horizon == 0 {
+            (self.rollout_len / 3).max(1) as u32
+        } else {
+            self.horizon as u32
+        }
+    }
+
+    /// The narrow window's side for a grid `width` cells wide.
+    pub fn window_side(&self, width: usize) -> usize {
+        match self.window {
+            0 if width > 25 => 7,
+            0 => 5,
+            n => n,
+        }
+    }
+
+    /// Whether the agent needs a world graph (WN over `V_rand` or `V_p`).
+    pub fn needs_graph(&self) -> bool {
+        self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All
+    }
+
+    /// A short name: `a2c`, `fn`, `fn-init`, `wn-pivotal-trav-init`, ...
+    pub fn name(&self) -> String {
+        let mut s = match self.kind {
+            AgentKind::A2c => "a2c".to_string(),
+            AgentKind::Feudal => "fn".to_string(),
+            AgentKind::WideNarrow => format!(
+                "wn-{}",
+                match self.candidates {
+                    Candidates::All => "all",
+                    Candidates::Random => "random",
+                    Candidates::Pivotal => "pivotal",
+                }
+            ),
+        };
+        if self.traversal {
+            s.push_str("-trav");
+        }
+        if self.init_from_gcp {
+            s.push_str("-init");
+        }
+        s
+    }
+}
+
+/// What a stage 2 agent takes from stage 1: the world graph over the
+/// candidate set (for WN over `V_rand` or `V_p`) and `π_g` (for
+/// initialisation and steered traversal).
+pub struct WorldGraphInputs {
+    /// The graph whose nodes are `V` (`None` for `V_all`).
+    pub graph: Option<WorldGraph>,
+    /// `π_g` as discovery left it.
+    pub gcp: Option<GoalConditionedPolicy>,
+}
+
+impl std::fmt::Debug for WorldGraphInputs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WorldGraphInputs")
+            .field("nodes", &self.graph.as_ref().map(|g| g.num_nodes()))
+            .field("gcp", &self.gcp.is_some())
+            .finish()
+    }
+}
+
+impl WorldGraphInputs {
+    /// A graph over 24 random cells of `layout` and no `π_g` (for the
+    /// learner benchmark, which needs no discovery run).
+    pub fn random_for_bench(layout: &Layout, task: Task, seed: u64) -> Result<WorldGraphInputs, LearnerError> {
+        let cfg = planner::PlannerConfig {
+            candidates: planner::CandidateSet::Random { k: 24 },
+            seed,
+            task,
+            ..planner::PlannerConfig::default()
+        };
+        Ok(WorldGraphInputs {
+            graph: Some(WorldGraph::build(layout, &cfg, &[])?),
+            gcp: None,
+        })
+    }
+}
+
+/// One environment's hierarchical state.
+#[derive(Debug, Clone)]
+struct EnvCtl {
+    need_decision: bool,
+    /// Reset the Manager's core before its next decision.
+    manager_reset: bool,
+    goal: WorkerGoal,
+    traversal: Option<Traversal>,
+}
+
+/// The per-batch state of an agent: core states, goals, traversals, the
+/// action RNG, and (training) the Manager's decision queues.
+#[derive(Debug)]
+struct Controller {
+    worker_state: LstmState,
+    manager_state: Option<LstmState>,
+    steer_state: Option<LstmState>,
+    envs: Vec<EnvCtl>,
+    queues: Vec<DecisionQueue>,
+    manager_init: Option<LstmState>,
+    rng: SmallRng,
+}
+
+/// What one iteration measured.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct IterationStats {
+    /// Env steps of the iteration.
+    pub env_steps: u64,
+    /// Episodes that ended.
+    pub episodes: usize,
+    /// Mean return of those episodes (0 when none).
+    pub mean_return: f64,
+    /// The Worker's (or the baseline's) loss.
+    pub worker: LossFigures,
+    /// The Manager's loss (zeros for A2C).
+    pub manager: LossFigures,
+    /// Manager intervals that ended (FN, WN).
+    pub intervals: usize,
+    /// Share of those in which the Worker reached `g_n`.
+    pub goals_reached: f64,
+    /// Share of env steps taken by graph traversal.
+    pub traversal_share: f64,
+}
+
+/// The result of an evaluation: one episode per environment.
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalResult {
+    /// Mean return (MultiGoal tasks) or success rate (Door-Key).
+    pub score: f64,
+    /// Mean episode return.
+    pub mean_return: f64,
+    /// Share of episodes that reached the exit.
+    pub success_rate: f64,
+    /// Episode returns, by environment.
+    pub returns: Vec<f32>,
+    /// Episode lengths.
+    pub lengths: Vec<u32>,
+    /// Share of steps taken by traversal.
+    pub traversal_share: f64,
+}
+
+/// One evaluation episode, for the picture of the paper's Figure 1.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct EpisodeTrace {
+    /// The agent's cell before the first step and after each.
+    pub cells: Vec<u32>,
+    /// Whether each step was taken by traversal.
+    pub traversed: Vec<bool>,
+    /// Manager decisions: `(step, g_w, g_n)`.
+    pub goals: Vec<(u32, u32, u32)>,
+    /// The episode's return.
+    pub episode_return: f32,
+}
+
+/// A stage 2 agent (module docs).
+pub struct HrlAgent {
+    cfg: AgentConfig,
+    task: Task,
+    width: usize,
+    height: usize,
+    num_actions: usize,
+    horizon: u32,
+    worker_vs: nn::VarStore,
+    worker: ActorCritic,
+    worker_opt: Adam,
+    manager_vs: Option<nn::VarStore>,
+    manager: Option<Manager>,
+    manager_opt: Option<Adam>,
+    /// Wide-goal cells `V` (WN).
+    candidates: Vec<u32>,
+    window: Option<Window>,
+    graph: Option<WorldGraph>,
+    gcp: Option<GoalConditionedPolicy>,
+    execution: Execution,
+    ctl: Controller,
+    rollout: Rollout,
+    seed: u64,
+    route: Route,
+    times: PhaseTimes,
+    init_report: Option<init::InitReport>,
+}
+
+impl std::fmt::Debug for HrlAgent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HrlAgent")
+            .field("cfg", &self.cfg)
+            .field("task", &self.task)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Salts of the agent's seeds.
+const SEGMENT_SALT: u64 = 0x5E6_0000;
+const EVAL_SALT: u64 = 0xE7A1_0000;
+
+impl HrlAgent {
+    /// A fresh agent for `task` on `layout`, weights initialised from
+    /// `seed` (then copied from `π_g` where configured).
+    pub fn new(
+        cfg: &AgentConfig,
+        layout: &Layout,
+        task: Task,
+        inputs: Option<WorldGraphInputs>,
+        seed: u64,
+    ) -> Result<HrlAgent, LearnerError> {
+        cfg.validate()?;
+        let (width, height) = (layout.width, layout.height);
+        let num_actions = task.num_actions();
+        let inputs = inputs.unwrap_or(WorldGraphInputs { graph: None, gcp: None });
+        if cfg.needs_graph() && inputs.graph.is_none() {
+            return Err(ConfigError::new("candidates", "WN over V_rand or V_p needs a world graph").into());
+        }
+        if cfg.init_from_gcp && inputs.gcp.is_none() {
+            return Err(ConfigError::new("init_from_gcp", "needs π_g from a discovery run").into());
+        }
+        let hierarchical = cfg.kind != AgentKind::A2c;
+        let net_cfg = ActorCriticConfig {
+            conv_channels: cfg.conv_channels,
+            hidden: cfg.hidden,
+            num_actions: num_actions as i64,
+            goal_channel: hierarchical,
+        };
+        let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
+            (AgentKind::WideNarrow, Candidates::All) => planner::pivotal::v_all(layout).iter().map(|c| c.0).collect(),
+            (AgentKind::WideNarrow, _) => inputs
+                .graph
+                .as_ref()
+                .map(|g| g.nodes().iter().map(|c| c.0).collect())
+                .unwrap_or_default(),
+            _ => Vec::new(),
+        };
+        let window = (cfg.kind == AgentKind::WideNarrow).then(|| Window::new(cfg.window_side(width), layout));
+        let valid_cells: Vec<bool> = {
+            let mut v = vec![false; width * height];
+            for c in planner::pivotal::v_all(layout) {
+                v[c.index()] = true;
+            }
+            v
+        };
+        let (worker_vs, worker, manager_vs, manager) = crate::seeding::init_seeded(seed, || {
+            let worker_vs = nn::VarStore::new(Device::Cpu);
+            let worker = ActorCritic::new(&worker_vs.root(), &net_cfg, width, height);
+            let (manager_vs, manager) = if hierarchical {
+                let vs = nn::VarStore::new(Device::Cpu);
+                let trunk = Trunk::new(
+                    &vs.root(),
+                    (crate::a2c::input::BASE_CHANNELS) as i64,
+                    cfg.conv_channels,
+                    cfg.hidden,
+                    width,
+                    height,
+                );
+                let m = Manager::new(&vs.root(), trunk, |p, hidden| match cfg.kind {
+                    AgentKind::WideNarrow => ManagerHead::WideNarrow(WideNarrowHead::new(
+                        p,
+                        hidden,
+                        candidates.len(),
+                        window.as_ref().map_or(1, Window::len),
+                    )),
+                    _ => Manager::feudal_head(p, hidden, &valid_cells),
+                });
+                (Some(vs), Some(m))
+            } else {
+                (None, None)
+            };
+            (worker_vs, worker, manager_vs, manager)
+        });
+        let mut init_report = None;
+        if cfg.init_from_gcp {
+            let gcp = inputs.gcp.as_ref().expect("checked above");
+            let g = gcp.config();
+            if g.conv_channels != cfg.conv_channels || g.hidden != cfg.hidden {
+                return Err(ConfigError::new(
+                    "init_from_gcp",
+                    format!(
+                        "π_g has conv {:?} / hidden {}; the agent has {:?} / {}",
+                        g.conv_channels, g.hidden, cfg.conv_channels, cfg.hidden
+                    ),
+                )
+                .into());
+            }
+            let mut report = init::copy_from(gcp.var_store(), &worker_vs, &["encoder", "core", "policy", "value"]);
+            if let Some(vs) = &manager_vs {
+                let m = init::copy_from(gcp.var_store(), vs, &["encoder"]);
+                report.copied.extend(m.copied.into_iter().map(|n| format!("manager/{n}")));
+                report.partial.extend(m.partial.into_iter().map(|n| format!("manager/{n}")));
+            }
+            init_report = Some(report);
+        }
+        let worker_opt = Adam::new(&[("worker", &worker_vs)], cfg.worker.learning_rate);
+        let manager_opt = manager_vs
+            .as_ref()
+            .map(|vs| Adam::new(&[("manager", vs)], cfg.manager.learning_rate));
+        let execution = if task == Task::MultiGoalStochastic {
+            Execution::Steer
+        } else {
+            Execution::Replay
+        };
+        if cfg.traversal && execution == Execution::Steer && inputs.gcp.is_none() {
+            return Err(ConfigError::new("traversal", "MultiGoal-Stochastic traversal is steered by π_g: give a discovery run").into());
+        }
+        let mut agent = HrlAgent {
+            cfg: cfg.clone(),
+            task,
+            width,
+            height,
+            num_actions,
+            horizon: cfg.horizon(),
+            rollout: Rollout::new(GradPath::Recompute, cfg.envs, width, height, hierarchical),
+            worker_vs,
+            worker,
+            worker_opt,
+            manager_vs,
+            manager,
+            manager_opt,
+            candidates,
+            window,
+            graph: if cfg.traversal { inputs.graph } else { None },
+            gcp: inputs.gcp,
+            execution,
+            ctl: Controller {
+                worker_state: LstmState::zeros(1, 1),
+                manager_state: None,
+                steer_state: None,
+                envs: Vec::new(),
+                queues: Vec::new(),
+                manager_init: None,
+                rng: SmallRng::seed_from_u64(seed),
+            },
+            seed,
+            route: Route::with_capacity(1024, 64),
+            times: PhaseTimes::default(),
+            init_report,
+        };
+        agent.ctl = agent.controller(cfg.envs, seed);
+        Ok(agent)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &AgentConfig {
+        &self.cfg
+    }
+
+    /// What `π_g` initialisation copied.
+    pub fn init_report(&self) -> Option<&init::InitReport> {
+        self.init_report.as_ref()
+    }
+
+    /// The wide-goal candidates `V` (WN).
+    pub fn candidates(&self) -> &[u32] {
+        &self.candidates
+    }
+
+    /// The world graph traversal follows.
+    pub fn graph(&self) -> Option<&WorldGraph> {
+        self.graph.as_ref()
+    }
+
+    /// Chooses the gradient path of the Worker's (or baseline's) update
+    /// (the benchmark's plain path is [`GradPath::PerStep`]).
+    pub fn set_grad_path(&mut self, path: GradPath) {
+        self.rollout = Rollout::new(path, self.cfg.envs, self.width, self.height, self.hierarchical());
+    }
+
+    fn hierarchical(&self) -> bool {
+        self.manager.is_some()
+    }
+
+    fn controller(&self, n: usize, seed: u64) -> Controller {
+        let fresh = EnvCtl {
+            need_decision: true,
+            manager_reset: true,
+            goal: WorkerGoal::new(NO_GOAL, NO_GOAL),
+            traversal: None,
+        };
+        Controller {
+            worker_state: self.worker.zero_state(n as i64),
+            manager_state: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
+            steer_state: self.gcp.as_ref().map(|g| g.network().zero_state(n as i64)),
+            envs: vec![fresh; n],
+            queues: (0..n).map(|_| DecisionQueue { decisions: Vec::new() }).collect(),
+            manager_init: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
+            rng: SmallRng::seed_from_u64(seed),
+        }
+    }
+
+    /// Starts training segment `segment`: every environment starts a new
+    /// episode, and the core states, goals and the action RNG start afresh
+    /// from `(seed, segment)`.
+    pub fn start_segment(&mut self, env: &mut dyn BatchEnvironment, segment: u64) -> Result<(), LearnerError> {
+        let n = env.num_envs();
+        if n != self.cfg.envs {
+            return Err(ConfigError::new("envs", format!("the agent was built for {} environments, the batch has {n}", self.cfg.envs)).into());
+        }
+        env.step(&vec![action::RESET; n])?;
+        self.ctl = self.controller(n, sim::env_seed(self.seed ^ SEGMENT_SALT, segment));
+        Ok(())
+    }
+
+    /// Where training time went since the last call.
+    pub fn take_times(&mut self) -> PhaseTimes {
+        let mut t = std::mem::take(&mut self.times);
+        t.add(&std::mem::take(&mut self.rollout.times));
+        t
+    }
+
+    /// Model FLOPs per env-step of the Worker's (baseline's) update path,
+    /// plus the Manager's forward and backward once per decision (about one
+    /// per `c / 2` steps).
+    pub fn flops_per_env_step(&self, path: GradPath) -> f64 {
+        let worker = crate::a2c::net::flops_per_env_step(self.worker.trunk(), self.num_actions as i64, path);
+        match &self.manager {
+            Some(m) => {
+                let (c1, rest) = crate::a2c::net::trunk_macs(m.trunk(), Some(10.0));
+                let per_decision = 2.0 * 3.0 * (c1 + rest);
+                worker + per_decision / (self.horizon as f64 / 2.0).max(1.0)
+            }
+            None => worker,
+        }
+    }
+
+    /// Goal marks of the Worker's input: one slot (FN) or two (WN).
+    fn goal_marks(&self, ctl: &Controller) -> Vec<u32> {
+        match self.cfg.kind {
+            AgentKind::WideNarrow => ctl.envs.iter().flat_map(|e| [e.goal.wide, e.goal.narrow]).collect(),
+            _ => ctl.envs.iter().map(|e| e.goal.narrow).collect(),
+        }
+    }
+
+    fn slots(&self) -> usize {
+        if self.cfg.kind == AgentKind::WideNarrow { 2 } else { 1 }
+    }
+
+    /// The Manager decides for every environment that needs a new goal;
+    /// with `record`, the decisions join the training queues.
+    fn decide(&mut self, ctl: &mut Controller, obs: &ObsView<'_>, record: bool, trace: &mut Option<(usize, u32, &mut EpisodeTrace)>) {
+        let Some(manager) = &self.manager else {
+            return;
+        };
+        let who: Vec<usize> = (0..ctl.envs.len()).filter(|&e| ctl.envs[e].need_decision).collect();
+        if who.is_empty() {
+            return;
+        }
+        let idx = Tensor::from_slice(&who.iter().map(|&e| e as i64).collect::<Vec<_>>());
+        let mut input = CellInput::new(self.width, self.height, false);
+        for &e in &who {
+            input.push_env(obs, e, None);
+        }
+        let resets: Vec<bool> = who.iter().map(|&e| ctl.envs[e].manager_reset).collect();
+        let state = ctl
+            .manager_state
+            .as_ref()
+            .expect("a Manager has a core state")
+            .select(&idx)
+            .reset_done(&mask(&resets));
+        let (next, values, h) = manager.act(&input, &state);
+        ctl.manager_state.as_mut().expect("state").scatter(&idx, &next);
+        // Draw the goals.
+        let mut picks: Vec<(i64, i64, u32, u32, Vec<f32>, Vec<bool>)> = Vec::with_capacity(who.len());
+        match manager.head() {
+            ManagerHead::Feudal { .. } => {
+                let pi = manager.feudal_policy(&h).expect("feudal");
+                for cell in crate::seeding::sample_index(&mut ctl.rng, &pi.probs()) {
+                    picks.push((cell as i64, 0, cell as u32, cell as u32, Vec::new(), Vec::new()));
+                }
+            }
+            ManagerHead::WideNarrow(head) => {
+                let window = self.window.as_ref().expect("WN has a window");
+                let wide = crate::seeding::sample_index(&mut ctl.rng, &head.wide(&h).probs());
+                let mut locals = Vec::new();
+                let mut valids = Vec::new();
+                for (j, &e) in who.iter().enumerate() {
+                    let gw = self.candidates[wide[j]];
+                    locals.push(window.local_input(obs, e, gw));
+                    valids.push(window.valid(gw));
+                }
+                let local = Tensor::from_slice(&locals.concat()).view([who.len() as i64, -1]);
+                let valid = Tensor::from_slice(&valids.concat()).view([who.len() as i64, -1]);
+                let narrow = tch::no_grad(|| crate::seeding::sample_index(&mut ctl.rng, &head.narrow(&h, &local, &valid).probs()));
+                for j in 0..who.len() {
+                    let gw = self.candidates[wide[j]];
+                    let gn = window.cell(gw, narrow[j]).expect("a valid slot is inside the grid");
+                    picks.push((wide[j] as i64, narrow[j] as i64, gw, gn, std::mem::take(&mut locals[j]), std::mem::take(&mut valids[j])));
+                }
+            }
+        }
+        for (j, (&e, (wide, narrow, gw, gn, local, valid))) in who.iter().zip(picks).enumerate() {
+            let c = &mut ctl.envs[e];
+            if record {
+                let mut one = CellInput::new(self.width, self.height, false);
+                one.push_env(obs, e, None);
+                ctl.queues[e].decisions.push(Decision {
+                    input: one,
+                    wide,
+                    narrow,
+                    local,
+                    valid,
+                    value: values[j],
+                    reset_before: c.manager_reset,
+                    rewards: Vec::new(),
+                    complete: false,
+                    episode_ended: false,
+                });
+            }
+            if let Some((te, step, t)) = trace.as_mut()
+                && *te == e
+            {
+                t.goals.push((*step, gw, gn));
+            }
+            c.need_decision = false;
+            c.manager_reset = false;
+            c.goal = WorkerGoal::new(gw, gn);
+        }
+        // A fresh goal episode for the Worker.
+        let fresh: Vec<bool> = (0..ctl.envs.len()).map(|e| who.contains(&e)).collect();
+        ctl.worker_state = ctl.worker_state.reset_done(&mask(&fresh));
+    }
+
+    /// Starts a traversal for environment `e` if it stands on a node with a
+    /// route to its wide goal (and `g_w` is not paid for yet).
+    fn try_traverse(&mut self, ctl: &mut Controller, obs: &ObsView<'_>, e: usize) -> bool {
+        let Some(graph) = &self.graph else {
+            return false;
+        };
+        let c = &ctl.envs[e];
+        if c.traversal.is_some() || c.goal.wide_paid || c.goal.wide == NO_GOAL {
+            return false;
+        }
+        match Traversal::plan(graph, obs, e, c.goal.wide, self.execution, &mut self.route) {
+            Some(t) => {
+                ctl.envs[e].traversal = Some(t);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Actions for the environments under traversal: the recorded action
+    /// (replay) or `π_g`'s greedy step towards the next node (steer).
+    fn traversal_actions(&mut self, ctl: &mut Controller, obs: &ObsView<'_>, actions: &mut [u8]) -> Result<(), LearnerError> {
+        let mut steer = false;
+        for (e, c) in ctl.envs.iter().enumerate() {
+            if let Some(t) = &c.traversal {
+                match t.execution() {
+                    Execution::Replay => actions[e] = t.next_action().expect("a traversal under way has an action"),
+                    Execution::Steer => steer = true,
+                }
+            }
+        }
+        if steer {
+            let gcp = self.gcp.as_mut().expect("steered traversal has π_g");
+            let goals: Vec<u32> = ctl
+                .envs
+                .iter()
+                .map(|c| c.traversal.as_ref().and_then(Traversal::waypoint).unwrap_or(NO_GOAL))
+                .collect();
+            let fresh: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.as_ref().is_some_and(Traversal::leg_starts)).collect();
+            let state = ctl.steer_state.as_ref().expect("steer state").reset_done(&mask(&fresh));
+            let (chosen, next) = gcp
+                .greedy_step(obs, &goals, &state)
+                .map_err(|e| LearnerError::Checkpoint { path: "π_g".into(), message: e.to_string() })?;
+            ctl.steer_state = Some(next);
+            for (e, c) in ctl.envs.iter().enumerate() {
+                if c.traversal.as_ref().is_some_and(|t| t.execution() == Execution::Steer) {
+                    // π_g was trained on the navigation actions.
+                    actions[e] = chosen[e].min(action::FORWARD);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// One environment step of the whole batch: Manager decisions,
+    /// traversal hand-overs, the Worker's (baseline's) actions, the step,
+    /// and its booking. With `train`, the step is recorded in the rollout
+    /// and the decision queues. Returns per-environment `(worker reward,
+    /// worker done, worker weight)` and the step's `(episode ended, return,
+    /// traversed)` figures.
+    fn step_batch(
+        &mut self,
+        ctl: &mut Controller,
+        env: &mut dyn BatchEnvironment,
+        train: bool,
+        mut trace: Option<(usize, u32, &mut EpisodeTrace)>,
+        stats: &mut StepCounts,
+    ) -> Result<(), LearnerError> {
+        let n = env.num_envs();
+        let t0 = std::time::Instant::now();
+        let (actions, out_state) = {
+            let obs = env.observe();
+            self.decide(ctl, &obs, train, &mut trace);
+            if self.graph.is_some() {
+                for e in 0..n {
+                    self.try_traverse(ctl, &obs, e);
+                }
+            }
+            let goals = self.goal_marks(ctl);
+            let marks = self.hierarchical().then(|| GoalMarks { cells: &goals, per_env: self.slots() });
+            let out = if train {
+                self.rollout.act(&self.worker, &obs, marks, &ctl.worker_state)
+            } else {
+                let mut input = CellInput::new(self.width, self.height, marks.is_some());
+                input.push_obs(&obs, marks);
+                tch::no_grad(|| self.worker.step(&input, &ctl.worker_state))
+            };
+            let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
+            let mut actions = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
+            self.traversal_actions(ctl, &obs, &mut actions)?;
+            (actions, out.state)
+        };
+        self.times.act += t0.elapsed().as_secs_f64();
+        let traversing: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.is_some()).collect();
+        let t1 = std::time::Instant::now();
+        env.step(&actions)?;
+        self.times.step += t1.elapsed().as_secs_f64();
+        let obs = env.observe();
+        let mut rewards = vec![0f32; n];
+        let mut dones = vec![false; n];
+        let mut weights = vec![0f32; n];
+        for e in 0..n {
+            let m: &EnvMeta = &obs.meta[e];
+            let ended = m.done();
+            let cell = (m.y as usize * self.width + m.x as usize) as u32;
+            if ended {
+                stats.episodes += 1;
+                stats.returns += f64::from(m.episode_return);
+                stats.successes += usize::from(m.terminated() && m.reward > 0.0);
+            }
+            stats.steps += 1;
+            if let Some((te, step, t)) = trace.as_mut()
+                && *te == e
+            {
+                t.cells.push(cell);
+                t.traversed.push(traversing[e]);
+                *step += 1;
+                if ended && t.episode_return == 0.0 {
+                    t.episode_return = m.episode_return;
+                }
+            }
+            if !self.hierarchical() {
+                (rewards[e], dones[e]) = a2c::task_step(m);
+                weights[e] = 1.0;
+                continue;
+            }
+            let horizon = self.horizon;
+            let (goal_r, penalty) = (self.cfg.goal_reward, self.cfg.step_penalty);
+            let c = &mut ctl.envs[e];
+            let mut interval_over = ended;
+            if let Some(q) = ctl.queues[e].decisions.last_mut()
+                && train
+            {
+                q.rewards.push(m.reward);
+            }
+            if traversing[e] {
+                stats.traversal_steps += 1;
+                dones[e] = true;
+                let t = c.traversal.as_mut().expect("traversing");
+                match t.advance(cell, ended) {
+                    Progress::Continue => {}
+                    Progress::Arrived => {
+                        c.traversal = None;
+                        c.goal.wide_paid = true;
+                        if cell == c.goal.narrow {
+                            interval_over = true;
+                            stats.reached += 1;
+                        }
+                        interval_over |= c.goal.steps >= horizon;
+                    }
+                    Progress::Stopped => {
+                        c.traversal = None;
+                        interval_over |= c.goal.steps >= horizon;
+                    }
+                }
+            } else {
+                let mut s = c.goal.book(cell, ended, horizon, goal_r, penalty);
+                stats.reached += usize::from(s.reached);
+                interval_over |= s.interval_over;
+                if !s.interval_over && self.graph.is_some() {
+                    // Hand over to a traversal from here, if there is one.
+                    if self.try_traverse(ctl, &obs, e) {
+                        ctl.envs[e].goal.hand_over(&mut s, goal_r);
+                    }
+                }
+                rewards[e] = s.reward;
+                dones[e] = s.done;
+                weights[e] = 1.0;
+            }
+            let c = &mut ctl.envs[e];
+            if interval_over {
+                stats.intervals += 1;
+                c.need_decision = true;
+                c.traversal = None;
+                dones[e] = true;
+                if ended {
+                    c.manager_reset = true;
+                }
+                if train && let Some(q) = ctl.queues[e].decisions.last_mut() {
+                    q.complete = true;
+                    q.episode_ended = ended;
+                }
+            }
+        }
+        if train {
+            self.rollout.record(&actions, &rewards, &dones, &weights);
+        }
+        ctl.worker_state = out_state.reset_done(&mask(&dones));
+        Ok(())
+    }
+
+    /// One training iteration: a rollout of `T` steps, then the Worker's
+    /// (baseline's) and the Manager's updates.
+    pub fn train_iteration(&mut self, env: &mut dyn BatchEnvironment) -> Result<IterationStats, LearnerError> {
+        let n = env.num_envs();
+        if n != self.cfg.envs {
+            return Err(ConfigError::new("envs", format!("the agent was built for {} environments, the batch has {n}", self.cfg.envs)).into());
+        }
+        let empty = self.controller(0, 0);
+        let mut ctl = std::mem::replace(&mut self.ctl, empty);
+        self.rollout.start(&ctl.worker_state);
+        let mut counts = StepCounts::default();
+        for _ in 0..self.cfg.rollout_len {
+            self.step_batch(&mut ctl, env, true, None, &mut counts)?;
+        }
+        {
+            let obs = env.observe();
+            self.decide(&mut ctl, &obs, true, &mut None);
+            let goals = self.goal_marks(&ctl);
+            let marks = self.hierarchical().then(|| GoalMarks { cells: &goals, per_env: self.slots() });
+            self.rollout.bootstrap = bootstrap_values(&self.worker, &obs, marks, &ctl.worker_state);
+        }
+        let t0 = std::time::Instant::now();
+        let (loss, worker) = self.rollout.loss(&self.worker, &self.cfg.worker);
+        let t1 = PhaseTimes::lap(&mut self.times.loss, t0);
+        self.worker_opt.backward_step(&loss, self.cfg.worker.grad_clip_norm);
+        let mut t2 = PhaseTimes::lap(&mut self.times.backward, t1);
+        let mut manager_figures = LossFigures::default();
+        if let (Some(m), Some(opt)) = (&self.manager, self.manager_opt.as_mut()) {
+            let init = ctl.manager_init.take().expect("Manager init state");
+            let (loss, figures, next) = m.loss(&ctl.queues, &init, &self.cfg.manager, self.cfg.manager.gamma);
+            t2 = PhaseTimes::lap(&mut self.times.loss, t2);
+            if figures.entries > 0.0 {
+                opt.backward_step(&loss, self.cfg.manager.grad_clip_norm);
+            }
+            PhaseTimes::lap(&mut self.times.backward, t2);
+            manager_figures = figures;
+            ctl.manager_init = Some(next);
+            for q in &mut ctl.queues {
+                let last = q.decisions.pop();
+                q.decisions.clear();
+                q.decisions.extend(last);
+            }
+        }
+        ctl.worker_state = ctl.worker_state.detach();
+        if let Some(s) = ctl.manager_state.as_mut() {
+            *s = s.detach();
+        }
+        self.ctl = ctl;
+        Ok(IterationStats {
+            env_steps: counts.steps,
+            episodes: counts.episodes,
+            mean_return: if counts.episodes > 0 { counts.returns / counts.episodes as f64 } else { 0.0 },
+            worker,
+            manager: manager_figures,
+            intervals: counts.intervals,
+            goals_reached: if counts.intervals > 0 { counts.reached as f64 / counts.intervals as f64 } else { 0.0 },
+            traversal_share: counts.traversal_steps as f64 / counts.steps.max(1) as f64,
+        })
+    }
+
+    /// Plays one episode in every environment of `env` (freshly reset)
+    /// with actions sampled from the policy (RNG seeded by `seed`), without
+    /// training; `trace` records environment 0's episode.
+    pub fn evaluate(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+        seed: u64,
+        trace: Option<&mut EpisodeTrace>,
+    ) -> Result<EvalResult, LearnerError> {
+        let n = env.num_envs();
+        env.step(&vec![action::RESET; n])?;
+        let mut ctl = self.controller(n, sim::env_seed(seed ^ EVAL_SALT, 0));
+        let mut done = vec![false; n];
+        let mut returns = vec![0f32; n];
+        let mut lengths = vec![0u32; n];
+        let mut success = vec![false; n];
+        let mut counts = StepCounts::default();
+        let mut trace = trace.map(|t| {
+            *t = EpisodeTrace::default();
+            let m = &env.observe().meta[0];
+            t.cells.push((m.y as usize * self.width + m.x as usize) as u32);
+            (0usize, 0u32, t)
+        });
+        while done.iter().any(|d| !d) {
+            let tr = match &mut trace {
+                Some((_, step, t)) if !done[0] => Some((0, *step, &mut **t)),
+                _ => None,
+            };
+            let before = tr.as_ref().map(|(_, s, _)| *s);
+            self.step_batch(&mut ctl, env, false, tr, &mut counts)?;
+            if let (Some((_, step, _)), Some(b)) = (&mut trace, before) {
+                *step = b + 1;
+            }
+            let obs = env.observe();
+            for e in 0..n {
+                let m = &obs.meta[e];
+                if !done[e] && m.done() {
+                    done[e] = true;
+                    returns[e] = m.episode_return;
+                    lengths[e] = m.episode_len;
+                    success[e] = m.terminated() && m.reward > 0.0;
+                }
+            }
+        }
+        if let Some((_, _, t)) = trace {
+            t.episode_return = returns[0];
+        }
+        let mean_return = returns.iter().map(|&r| f64::from(r)).sum::<f64>() / n.max(1) as f64;
+        let success_rate = success.iter().filter(|&&s| s).count() as f64 / n.max(1) as f64;
+        Ok(EvalResult {
+            score: if self.task == Task::DoorKey { success_rate } else { mean_return },
+            mean_return,
+            success_rate,
+            returns,
+            lengths,
+            traversal_share: counts.traversal_steps as f64 / counts.steps.max(1) as f64,
+        })
+    }
+
+    /// Every tensor of the agent's state: the networks' weights and the
+    /// optimisers' moments (`worker/...`, `manager/...`, `adam-worker/...`).
+    fn named_tensors(&self) -> Vec<(String, Tensor)> {
+        let mut out: Vec<(String, Tensor)> = Vec::new();
+        let mut add = |prefix: &str, vs: &nn::VarStore| {
+            let mut v: Vec<(String, Tensor)> = vs.variables().into_iter().map(|(k, t)| (format!("{prefix}/{k}"), t)).collect();
+            v.sort_by(|a, b| a.0.cmp(&b.0));
+            out.extend(v);
+        };
+        add("worker", &self.worker_vs);
+        if let Some(vs) = &self.manager_vs {
+            add("manager", vs);
+        }
+        out.extend(self.worker_opt.state().into_iter().map(|(k, t)| (format!("worker-{k}"), t)));
+        if let Some(o) = &self.manager_opt {
+            out.extend(o.state().into_iter().map(|(k, t)| (format!("manager-{k}"), t)));
+        }
+        out
+    }
+
+    /// The weights and optimiser moments as bytes (a checkpoint's tensor
+    /// file).
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LearnerError> {
+        let named = self.named_tensors();
+        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), t)).collect();
+        let mut buf = Vec::new();
+        Tensor::save_multi_to_stream(&refs, &mut buf)?;
+        Ok(buf)
+    }
+
+    /// Restores [`Self::to_bytes`] (of an agent of the same configuration);
+    /// `source` names the input in errors.
+    pub fn load_bytes(&mut self, bytes: &[u8], source: &Path) -> Result<(), LearnerError> {
+        let bad = |message: String| LearnerError::Checkpoint {
+            path: source.display().to_string(),
+            message,
+        };
+        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(bytes)).map_err(|e| bad(e.to_string()))?;
+        let find = |k: &str| loaded.iter().find(|(n, _)| n == k).map(|(_, t)| t);
+        tch::no_grad(|| -> Result<(), LearnerError> {
+            for (prefix, vs) in std::iter::once(("worker", &self.worker_vs)).chain(self.manager_vs.as_ref().map(|v| ("manager", v))) {
+                for (k, mut t) in vs.variables() {
+                    let key = format!("{prefix}/{k}");
+                    let src = find(&key).ok_or_else(|| bad(format!("no tensor {key}")))?;
+                    if src.size() != t.size() {
+                        return Err(bad(format!("{key} has shape {:?}, expected {:?}", src.size(), t.size())));
+                    }
+                    t.copy_(src);
+                }
+            }
+            Ok(())
+        })?;
+        let strip = |prefix: &str| -> Vec<(String, Tensor)> {
+            loaded
+                .iter()
+                .filter_map(|(k, t)| k.strip_prefix(prefix).map(|s| (s.to_string(), t.shallow_clone())))
+                .collect()
+        };
+        self.worker_opt.load_state(&strip("worker-")).map_err(bad)?;
+        if let Some(o) = self.manager_opt.as_mut() {
+            o.load_state(&strip("manager-")).map_err(bad)?;
+        }
+        Ok(())
+    }
+}
+
+/// Counts of one rollout or evaluation.
+#[derive(Debug, Default)]
+struct StepCounts {
+    steps: u64,
+    episodes: usize,
+    returns: f64,
+    successes: usize,
+    intervals: usize,
+    reached: usize,
+    traversal_steps: u64,
+}

@@ -1,0 +1,368 @@
+//! `worldgraph bench learner`: training throughput of a learner (env-steps
+//! per second of rollout + update), where an iteration's time goes, and the
+//! same updates through the plain path (dense first convolution, autograd
+//! at every rollout step) measured in alternating windows of the same run.
+//! Also the model's FLOPs per env-step against a dense matrix product's
+//! GFLOP/s on the same threads.
+
+use std::time::Instant;
+
+use clap::{Args, ValueEnum};
+use learner::a2c::PhaseTimes;
+use learner::a2c::rollout::GradPath;
+use learner::batch_env::{BatchEnvironment, InProcess};
+use learner::hrl::{AgentConfig, AgentKind, Candidates, HrlAgent, WorldGraphInputs};
+use serde::Serialize;
+use tch::{Device, Kind, Tensor};
+
+use crate::world::WorldArgs;
+
+/// Which learner to train.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BenchAgent {
+    /// The goal-conditioned policy π_g of stage 1.
+    Gcp,
+    /// The A2C-LSTM baseline.
+    A2c,
+    /// The Feudal Network (Manager over all cells, Worker).
+    Fn,
+    /// Wide-then-Narrow over random candidate states, with traversal.
+    Wn,
+}
+
+/// `bench learner` options.
+#[derive(Debug, Clone, Args)]
+pub struct BenchLearnerArgs {
+    /// Learner to train.
+    #[arg(long, value_enum, default_value = "gcp")]
+    pub agent: BenchAgent,
+    #[command(flatten)]
+    pub world: WorldArgs,
+    /// Environments per update.
+    #[arg(long, default_value_t = 32)]
+    pub envs: usize,
+    /// Rollout length per update [default: 16 for gcp, 60 for the stage 2 agents].
+    #[arg(long)]
+    pub rollout: Option<usize>,
+    /// libtorch intra-op threads (the simulator runs on one thread).
+    #[arg(long, default_value_t = 2)]
+    pub threads: i32,
+    /// Seconds of measurement in total, split into alternating windows of
+    /// the fast and the plain path.
+    #[arg(long, default_value_t = 12.0)]
+    pub seconds: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Figures of one path.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct PathFigures {
+    /// Training env-steps per second (median over windows).
+    pub env_steps_per_sec: f64,
+    /// Env steps trained in all windows.
+    pub env_steps: u64,
+    /// Share of the iteration time per phase.
+    pub phases: PhaseShares,
+    /// Model FLOPs per env-step (acting, update forward and backward).
+    pub flops_per_env_step: f64,
+    /// Achieved GFLOP/s (FLOPs per env-step × env-steps/s).
+    pub achieved_gflops: f64,
+}
+
+/// Where an iteration's time goes (fractions of the measured time).
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct PhaseShares {
+    /// Stepping the environments.
+    pub step: f64,
+    /// Encoding observations.
+    pub encode: f64,
+    /// Acting forward passes.
+    pub act: f64,
+    /// The update's forward pass and loss.
+    pub loss: f64,
+    /// Backward and optimiser.
+    pub backward: f64,
+    /// Everything else (goal and Manager bookkeeping, sampling, ...).
+    pub other: f64,
+}
+
+/// `bench learner`'s report.
+#[derive(Debug, Clone, Serialize)]
+pub struct LearnerBenchReport {
+    /// Learner.
+    pub agent: BenchAgent,
+    /// Maze.
+    pub maze: String,
+    /// Task.
+    pub task: String,
+    /// Environments.
+    pub envs: usize,
+    /// Rollout length.
+    pub rollout: usize,
+    /// libtorch threads.
+    pub threads: i32,
+    /// The fast path (embedding-bag first layer, no_grad acting, batched
+    /// recomputation).
+    pub fast: PathFigures,
+    /// The plain path (dense first layer, autograd at every step).
+    pub plain: PathFigures,
+    /// Fast over plain env-steps/s, median of the paired windows.
+    pub speedup: f64,
+    /// Dense matrix product GFLOP/s on the same threads (the compute bound).
+    pub matmul_gflops: f64,
+    /// Fast path's achieved GFLOP/s over the matmul bound.
+    pub share_of_bound: f64,
+}
+
+/// A learner the bench can train.
+enum Learner {
+    Gcp(Box<learner::gcp::GoalConditionedPolicy>),
+    Hrl(Box<HrlAgent>),
+}
+
+impl Learner {
+    fn iterate(&mut self, env: &mut dyn BatchEnvironment) -> anyhow::Result<()> {
+        match self {
+            Learner::Gcp(g) => {
+                g.train_iteration(env, None)?;
+            }
+            Learner::Hrl(a) => {
+                a.train_iteration(env)?;
+            }
+        }
+        Ok(())
+    }
+    fn take_times(&mut self) -> PhaseTimes {
+        match self {
+            Learner::Gcp(g) => g.take_times(),
+            Learner::Hrl(a) => a.take_times(),
+        }
+    }
+    fn flops(&self, path: GradPath) -> f64 {
+        match self {
+            Learner::Gcp(g) => {
+                let net = g.network();
+                learner::a2c::net::flops_per_env_step(net.trunk(), net.config().num_actions, path)
+            }
+            Learner::Hrl(a) => a.flops_per_env_step(path),
+        }
+    }
+}
+
+fn build(
+    a: &BenchLearnerArgs,
+    path: GradPath,
+    rollout: usize,
+) -> anyhow::Result<(Learner, InProcess)> {
+    let (layout, env_cfg) = a.world.build()?;
+    let env = InProcess::new(layout.clone(), env_cfg, a.envs, a.world.seed, 1)?;
+    let num_actions = env_cfg.task.num_actions();
+    let learner = match a.agent {
+        BenchAgent::Gcp => {
+            let cfg = learner::gcp::GcpConfig {
+                rollout_len: rollout,
+                ..Default::default()
+            };
+            let mut g = learner::gcp::GoalConditionedPolicy::new(
+                &cfg,
+                &layout,
+                a.envs,
+                num_actions,
+                a.world.seed,
+            )?;
+            g.set_grad_path(path);
+            Learner::Gcp(Box::new(g))
+        }
+        kind => {
+            let mut cfg = AgentConfig {
+                envs: a.envs,
+                rollout_len: rollout,
+                ..AgentConfig::default()
+            };
+            cfg.kind = match kind {
+                BenchAgent::A2c => AgentKind::A2c,
+                BenchAgent::Fn => AgentKind::Feudal,
+                _ => AgentKind::WideNarrow,
+            };
+            if kind == BenchAgent::Wn {
+                cfg.candidates = Candidates::Random;
+                cfg.traversal = true;
+            }
+            let graph = if cfg.needs_graph() {
+                Some(WorldGraphInputs::random_for_bench(&layout, env_cfg.task, a.world.seed)?)
+            } else {
+                None
+            };
+            let mut agent = HrlAgent::new(&cfg, &layout, env_cfg.task, graph, a.world.seed)?;
+            agent.set_grad_path(path);
+            Learner::Hrl(Box::new(agent))
+        }
+    };
+    Ok((learner, env))
+}
+
+/// Dense `n × n` matrix products on the current threads: GFLOP/s.
+fn matmul_gflops(seconds: f64) -> f64 {
+    let n = 384;
+    let a = Tensor::randn([n, n], (Kind::Float, Device::Cpu));
+    let b = Tensor::randn([n, n], (Kind::Float, Device::Cpu));
+    let _ = a.matmul(&b);
+    let start = Instant::now();
+    let mut count = 0u64;
+    while start.elapsed().as_secs_f64() < seconds {
+        let _ = a.matmul(&b);
+        count += 1;
+    }
+    2.0 * (n as f64).powi(3) * count as f64 / start.elapsed().as_secs_f64() / 1e9
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() { 0.0 } else { v[v.len() / 2] }
+}
+
+fn shares(t: &PhaseTimes, wall: f64) -> PhaseShares {
+    let w = wall.max(1e-9);
+    PhaseShares {
+        step: t.step / w,
+        encode: t.encode / w,
+        act: t.act / w,
+        loss: t.loss / w,
+        backward: t.backward / w,
+        other: ((wall - t.total()) / w).max(0.0),
+    }
+}
+
+/// Runs `bench learner`.
+pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
+    anyhow::ensure!(a.envs > 0, "--envs must be at least 1");
+    anyhow::ensure!(a.threads > 0, "--threads must be at least 1");
+    anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
+    tch::set_num_threads(a.threads);
+    let rollout = a.rollout.unwrap_or(if a.agent == BenchAgent::Gcp { 16 } else { 60 });
+    anyhow::ensure!(rollout > 0, "--rollout must be at least 1");
+    let (mut fast, mut fast_env) = build(&a, GradPath::Recompute, rollout)?;
+    let (mut plain, mut plain_env) = build(&a, GradPath::PerStep, rollout)?;
+    let steps_per_iter = (a.envs * rollout) as u64;
+    // Warm-up: one iteration each (allocator, libtorch's kernels).
+    fast.iterate(&mut fast_env)?;
+    plain.iterate(&mut plain_env)?;
+    fast.take_times();
+    plain.take_times();
+
+    const WINDOWS: usize = 3;
+    let window = a.seconds / (2 * WINDOWS) as f64;
+    let (mut fast_rates, mut plain_rates, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut fast_times, mut plain_times) = (PhaseTimes::default(), PhaseTimes::default());
+    let (mut fast_wall, mut plain_wall) = (0.0, 0.0);
+    let (mut fast_steps, mut plain_steps) = (0u64, 0u64);
+    let bar = crate::progress::bar(2 * WINDOWS as u64, "bench learner windows");
+    for _ in 0..WINDOWS {
+        let measure = |l: &mut Learner, env: &mut InProcess| -> anyhow::Result<(f64, f64, u64)> {
+            let start = Instant::now();
+            let mut steps = 0;
+            while start.elapsed().as_secs_f64() < window {
+                l.iterate(env)?;
+                steps += steps_per_iter;
+            }
+            let wall = start.elapsed().as_secs_f64();
+            Ok((steps as f64 / wall, wall, steps))
+        };
+        let (rf, wf, sf) = measure(&mut fast, &mut fast_env)?;
+        bar.inc(1);
+        let (rp, wp, sp) = measure(&mut plain, &mut plain_env)?;
+        bar.inc(1);
+        fast_times.add(&fast.take_times());
+        plain_times.add(&plain.take_times());
+        fast_wall += wf;
+        plain_wall += wp;
+        fast_steps += sf;
+        plain_steps += sp;
+        fast_rates.push(rf);
+        plain_rates.push(rp);
+        ratios.push(rf / rp);
+    }
+    bar.finish_and_clear();
+    let gflops = matmul_gflops(1.0);
+    let figures = |rates: Vec<f64>, t: &PhaseTimes, wall: f64, steps: u64, flops: f64| {
+        let rate = median(rates);
+        PathFigures {
+            env_steps_per_sec: rate,
+            env_steps: steps,
+            phases: shares(t, wall),
+            flops_per_env_step: flops,
+            achieved_gflops: flops * rate / 1e9,
+        }
+    };
+    let fast_fig = figures(
+        fast_rates,
+        &fast_times,
+        fast_wall,
+        fast_steps,
+        fast.flops(GradPath::Recompute),
+    );
+    let plain_fig = figures(
+        plain_rates,
+        &plain_times,
+        plain_wall,
+        plain_steps,
+        plain.flops(GradPath::PerStep),
+    );
+    let (layout, env_cfg) = a.world.build()?;
+    let report = LearnerBenchReport {
+        agent: a.agent,
+        maze: layout.name.clone(),
+        task: env_cfg.task.name().to_string(),
+        envs: a.envs,
+        rollout,
+        threads: a.threads,
+        share_of_bound: fast_fig.achieved_gflops / gflops.max(1e-9),
+        fast: fast_fig,
+        plain: plain_fig,
+        speedup: median(ratios),
+        matmul_gflops: gflops,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&report);
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+fn print_table(r: &LearnerBenchReport) {
+    println!(
+        "bench learner: {:?} on {} / {}, {} envs × rollout {}, {} libtorch thread(s)",
+        r.agent, r.maze, r.task, r.envs, r.rollout, r.threads
+    );
+    println!(
+        "{:<8} {:>14} {:>9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7} {:>12} {:>9}",
+        "path", "env-steps/s", "step", "encode", "act", "loss", "bwd", "other", "", "FLOP/step", "GFLOP/s"
+    );
+    for (name, f) in [("fast", &r.fast), ("plain", &r.plain)] {
+        let p = &f.phases;
+        println!(
+            "{:<8} {:>14.0} {:>8.1}% {:>8.1}% {:>6.1}% {:>6.1}% {:>6.1}% {:>8.1}% {:>7} {:>12.3e} {:>9.2}",
+            name,
+            f.env_steps_per_sec,
+            100.0 * p.step,
+            100.0 * p.encode,
+            100.0 * p.act,
+            100.0 * p.loss,
+            100.0 * p.backward,
+            100.0 * p.other,
+            "",
+            f.flops_per_env_step,
+            f.achieved_gflops
+        );
+    }
+    println!(
+        "speedup fast/plain {:.2}× (median of paired windows); matmul bound {:.1} GFLOP/s, fast path at {:.1} % of it",
+        r.speedup,
+        r.matmul_gflops,
+        100.0 * r.share_of_bound
+    );
+}

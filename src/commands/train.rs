@@ -1,0 +1,770 @@
+//! `worldgraph train`: stage 2 of the paper — one agent (A2C, FN or WN),
+//! one task, one maze, one seed — under the paper's protocol: periodic
+//! validation on 10 validation seeds keeps the best checkpoint, which is
+//! scored at the end on 100 held-out test seeds (section 5, Control
+//! Experiments). `worldgraph evaluate` scores a run on any seeds.
+//!
+//! Training runs in segments of `eval_every` env steps; after each, the
+//! agent is validated and the run checkpointed (weights, optimiser moments,
+//! metrics), so a killed run resumes at the last segment boundary and ends
+//! exactly as an uninterrupted one.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use learner::batch_env::{BatchEnvironment, InProcess};
+use learner::gcp::{GcpConfig, GoalConditionedPolicy};
+use learner::hrl::{AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, HrlAgent, IterationStats, WorldGraphInputs};
+use serde::{Deserialize, Serialize};
+use sim::chart::{LineChart, Series, XScale};
+use sim::render::{Canvas, draw_grid, write_atomic};
+use sim::{BatchEnv, EnvConfig, Layout, Maze, Task};
+
+/// Environment stream of the validation seeds: validation seed `v` is the
+/// environment `(VALIDATION_STREAM, v)`.
+pub const VALIDATION_STREAM: u64 = 1_000_003;
+/// Environment stream of the test seeds.
+pub const TEST_STREAM: u64 = 2_000_003;
+/// Training seeds are below this (so their streams `(seed, i)` never meet
+/// the validation and test streams).
+pub const MAX_TRAIN_SEED: u64 = 1_000_000;
+
+/// The agent on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AgentArg {
+    /// The A2C-LSTM baseline.
+    A2c,
+    /// The Feudal Network.
+    Fn,
+    /// Wide-then-Narrow.
+    Wn,
+}
+
+/// `--candidates`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CandidatesArg {
+    /// `V_all`: every valid cell.
+    All,
+    /// `V_rand`: random cells, as many as `V_p`.
+    Random,
+    /// `V_p`: the discovery run's pivotal states.
+    Pivotal,
+}
+
+/// `--init`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum InitArg {
+    /// Fresh weights.
+    None,
+    /// The Manager's and Worker's encoders (and the Worker's core and
+    /// heads) from the discovery run's `π_g`.
+    PiG,
+}
+
+/// `train` options.
+#[derive(Debug, Clone, Args)]
+pub struct TrainArgs {
+    /// Task: multigoal, multigoal-sparse, multigoal-stochastic or doorkey.
+    #[arg(long, default_value = "multigoal")]
+    pub task: Task,
+    /// Embedded maze: small, medium or large (Door-Key uses its Door-Key variant).
+    #[arg(long, default_value = "small")]
+    pub maze: Maze,
+    /// Agent [default: the --config file's, else wn].
+    #[arg(long, value_enum)]
+    pub agent: Option<AgentArg>,
+    /// Wide-goal candidates of WN [default: the --config file's, else pivotal].
+    #[arg(long, value_enum)]
+    pub candidates: Option<CandidatesArg>,
+    /// Initialisation [default: the --config file's, else none].
+    #[arg(long, value_enum)]
+    pub init: Option<InitArg>,
+    /// World graph traversal (WN over random or pivotal candidates).
+    #[arg(long)]
+    pub traversal: bool,
+    /// The `worldgraph discover` run whose world graph (V_p) and π_g the
+    /// agent uses (needed for --candidates random|pivotal, --init pi-g).
+    #[arg(long)]
+    pub world_graph: Option<PathBuf>,
+    /// Training seed (below 1,000,000): weights, training environments
+    /// `(seed, i)`, V_rand.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// A TOML file of training settings (any subset of the resolved
+    /// `config.toml` a run writes; unknown fields are refused).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Env-step budget [default: the --config file's, else 1,000,000].
+    #[arg(long)]
+    pub env_steps: Option<u64>,
+    /// Run directory [default: runs/train-<maze>-<task>-<agent>-<seed>].
+    #[arg(long)]
+    pub run: Option<PathBuf>,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Everything `train` is configured by (the run's `config.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Env-step budget.
+    pub env_steps: u64,
+    /// Env steps per segment (validation and checkpoint after each).
+    pub eval_every: u64,
+    /// Validation seeds.
+    pub validation_seeds: usize,
+    /// Test seeds.
+    pub test_seeds: usize,
+    /// The agent.
+    pub agent: AgentConfig,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            env_steps: 1_000_000,
+            eval_every: 50_000,
+            validation_seeds: 10,
+            test_seeds: 100,
+            agent: AgentConfig::default(),
+        }
+    }
+}
+
+/// A run's identity: what must match to resume it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunIdentity {
+    /// Maze.
+    pub maze: String,
+    /// Task.
+    pub task: Task,
+    /// Seed.
+    pub seed: u64,
+    /// The discovery run (canonical path), if any.
+    pub world_graph: Option<String>,
+    /// The resolved configuration, less the budget.
+    pub config: TrainConfig,
+}
+
+/// One row of `metrics.csv` (one segment).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct MetricsRow {
+    /// Segments done.
+    pub segment: u64,
+    /// Iterations done.
+    pub iteration: u64,
+    /// Env steps done.
+    pub env_steps: u64,
+    /// Mean return of the training episodes of the segment.
+    pub train_return: f64,
+    /// Validation score after the segment.
+    pub validation_score: f64,
+    /// Worker (or baseline) policy loss, mean over the segment.
+    pub worker_policy_loss: f64,
+    /// Worker value loss.
+    pub worker_value_loss: f64,
+    /// Worker entropy.
+    pub worker_entropy: f64,
+    /// Manager policy loss.
+    pub manager_policy_loss: f64,
+    /// Manager value loss.
+    pub manager_value_loss: f64,
+    /// Manager entropy.
+    pub manager_entropy: f64,
+    /// Share of Manager intervals in which the Worker reached its goal.
+    pub goals_reached: f64,
+    /// Share of env steps taken by traversal.
+    pub traversal_share: f64,
+}
+
+/// The run's progress (`checkpoint/state.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RunState {
+    identity: RunIdentity,
+    segments_done: u64,
+    env_steps: u64,
+    best_score: Option<f64>,
+    best_segment: u64,
+    rows: Vec<MetricsRow>,
+    wall_seconds: Vec<f64>,
+}
+
+/// `test.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TestSummary {
+    /// The agent's short name.
+    pub agent: String,
+    /// Maze.
+    pub maze: String,
+    /// Task.
+    pub task: String,
+    /// Training seed.
+    pub seed: u64,
+    /// Test score of the best checkpoint (mean reward, or Door-Key success rate).
+    pub test_score: f64,
+    /// Mean test return.
+    pub test_return: f64,
+    /// Test success rate.
+    pub test_success_rate: f64,
+    /// Test seeds: environments `(test_stream, 0..test_seeds)`.
+    pub test_stream: u64,
+    /// Number of test seeds.
+    pub test_seeds: usize,
+    /// Validation seeds: `(validation_stream, 0..validation_seeds)`.
+    pub validation_stream: u64,
+    /// Number of validation seeds.
+    pub validation_seeds: usize,
+    /// Best validation score and the env steps it was reached at.
+    pub best_validation: f64,
+    /// Env steps at the best checkpoint.
+    pub best_env_steps: u64,
+    /// Env steps trained.
+    pub env_steps: u64,
+    /// Wall seconds of training (all sessions).
+    pub wall_seconds: f64,
+    /// Training env-steps per second.
+    pub train_steps_per_sec: f64,
+    /// Validation curve: `(env steps, score)`.
+    pub validation_curve: Vec<(u64, f64)>,
+}
+
+fn agent_config(a: &TrainArgs, base: &AgentConfig) -> AgentConfig {
+    let mut cfg = base.clone();
+    if let Some(k) = a.agent {
+        cfg.kind = match k {
+            AgentArg::A2c => AgentKind::A2c,
+            AgentArg::Fn => AgentKind::Feudal,
+            AgentArg::Wn => AgentKind::WideNarrow,
+        };
+    }
+    if let Some(c) = a.candidates {
+        cfg.candidates = match c {
+            CandidatesArg::All => Candidates::All,
+            CandidatesArg::Random => Candidates::Random,
+            CandidatesArg::Pivotal => Candidates::Pivotal,
+        };
+    }
+    if let Some(i) = a.init {
+        cfg.init_from_gcp = i == InitArg::PiG;
+    }
+    if a.traversal {
+        cfg.traversal = true;
+    }
+    cfg
+}
+
+/// Reads a TOML config file.
+pub fn read_config(path: &Path) -> anyhow::Result<TrainConfig> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("{} is not a valid training config", path.display()))
+}
+
+/// `π_g` of a discovery run, for `layout` (its weights fit any layout of
+/// the same size).
+pub fn load_gcp(dir: &Path, layout: &Layout) -> anyhow::Result<GoalConditionedPolicy> {
+    let cfg_path = dir.join("pi_g.json");
+    let cfg: GcpConfig = serde_json::from_slice(
+        &std::fs::read(&cfg_path).with_context(|| format!("cannot read {} (a discover run writes it)", cfg_path.display()))?,
+    )
+    .with_context(|| format!("{} is not a π_g config", cfg_path.display()))?;
+    let mut gcp = GoalConditionedPolicy::new(&cfg, layout, 1, Task::MultiGoal.num_actions(), 0)?;
+    gcp.load(dir.join("pi_g.ot"))?;
+    Ok(gcp)
+}
+
+/// The world graph over the candidate set on the task's layout: `V_p` as
+/// discovered (re-walked on the Door-Key layout when the task's layout
+/// differs), or `V_rand` of the same size with edges formed the same way
+/// (random walks, then `π_g` refinement).
+pub fn world_graph_for(
+    dir: &Path,
+    layout: &Layout,
+    task: Task,
+    candidates: Candidates,
+    seed: u64,
+    gcp: &mut GoalConditionedPolicy,
+) -> anyhow::Result<planner::WorldGraph> {
+    let path = dir.join("graph.json");
+    let discovered = planner::WorldGraph::load(&path).with_context(|| format!("cannot load the world graph {}", path.display()))?;
+    let same_layout = discovered.layout().cells == layout.cells;
+    let pivotal: Vec<u32> = discovered
+        .nodes()
+        .iter()
+        .map(|c| c.0)
+        .filter(|&c| planner::pivotal::is_node_object(layout.object(c as usize % layout.width, c as usize / layout.width)))
+        .collect();
+    if candidates == Candidates::Pivotal && same_layout && task != Task::DoorKey {
+        return Ok(discovered);
+    }
+    let nodes = match candidates {
+        Candidates::Pivotal => planner::pivotal::nodes_from_cells(layout, &pivotal),
+        _ => planner::pivotal::v_rand(layout, pivotal.len(), seed)?,
+    };
+    let cfg = planner::PlannerConfig {
+        candidates: planner::CandidateSet::Given,
+        seed,
+        task: if task == Task::DoorKey { Task::DoorKey } else { Task::MultiGoal },
+        shorten: false,
+        ..planner::PlannerConfig::default()
+    };
+    let mut graph = planner::WorldGraph::build(layout, &cfg, &nodes)?;
+    learner::edge_refinement::refine_with_gcp(&mut graph, gcp)?;
+    Ok(graph)
+}
+
+/// The agent of a run: configuration, layout, and the stage 1 inputs.
+pub fn build_agent(
+    cfg: &AgentConfig,
+    layout: &Layout,
+    task: Task,
+    world_graph: Option<&Path>,
+    seed: u64,
+) -> anyhow::Result<HrlAgent> {
+    let needs_run = cfg.needs_graph() || cfg.init_from_gcp || (cfg.traversal && task == Task::MultiGoalStochastic);
+    let inputs = match world_graph {
+        Some(dir) => {
+            let mut gcp = load_gcp(dir, layout)?;
+            let graph = if cfg.needs_graph() {
+                Some(world_graph_for(dir, layout, task, cfg.candidates, seed, &mut gcp)?)
+            } else {
+                None
+            };
+            Some(WorldGraphInputs { graph, gcp: Some(gcp) })
+        }
+        None if needs_run => bail!(
+            "{} needs --world-graph DISCOVER_RUN (its V_p and π_g); run `worldgraph discover --maze ...` first",
+            cfg.name()
+        ),
+        None => None,
+    };
+    Ok(HrlAgent::new(cfg, layout, task, inputs, seed)?)
+}
+
+/// Evaluation environments: `count` seeds of `stream` from `first`, one
+/// episode each.
+pub fn eval_env(layout: &Layout, env_cfg: EnvConfig, stream: u64, first: u64, count: usize) -> anyhow::Result<InProcess> {
+    let batch = BatchEnv::with_first_index(layout.clone(), env_cfg, first as usize, count, stream, 1)?;
+    Ok(InProcess::from_batch(batch))
+}
+
+fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
+    a.run.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("train-{}-{}-{}-{}", layout.name, a.task.name(), cfg.name(), a.seed))
+    })
+}
+
+fn save_state(dir: &Path, state: &RunState, agent: &HrlAgent, best: Option<&[u8]>) -> anyhow::Result<()> {
+    let ckpt = dir.join("checkpoint");
+    std::fs::create_dir_all(&ckpt).with_context(|| format!("cannot create {}", ckpt.display()))?;
+    write_atomic(&ckpt.join(format!("agent-{}.ot", state.segments_done)), &agent.to_bytes()?)?;
+    if let Some(b) = best {
+        write_atomic(&ckpt.join("best.ot"), b)?;
+    }
+    // The state names its weight file: written last, it commits the set.
+    write_atomic(&ckpt.join("state.json"), &serde_json::to_vec_pretty(state)?)?;
+    if state.segments_done > 0 {
+        let _ = std::fs::remove_file(ckpt.join(format!("agent-{}.ot", state.segments_done - 1)));
+    }
+    write_metrics(dir, state)?;
+    Ok(())
+}
+
+fn write_metrics(dir: &Path, state: &RunState) -> anyhow::Result<()> {
+    let mut w = csv_writer();
+    for r in &state.rows {
+        w.push_str(&format!(
+            "{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}\n",
+            r.segment,
+            r.iteration,
+            r.env_steps,
+            r.train_return,
+            r.validation_score,
+            r.worker_policy_loss,
+            r.worker_value_loss,
+            r.worker_entropy,
+            r.manager_policy_loss,
+            r.manager_value_loss,
+            r.manager_entropy,
+            r.goals_reached,
+            r.traversal_share
+        ));
+    }
+    write_atomic(&dir.join("metrics.csv"), w.as_bytes())?;
+    let mut t = String::from("segment,env_steps,wall_seconds\n");
+    for (r, s) in state.rows.iter().zip(&state.wall_seconds) {
+        t.push_str(&format!("{},{},{:.3}\n", r.segment, r.env_steps, s));
+    }
+    write_atomic(&dir.join("timing.csv"), t.as_bytes())?;
+    Ok(())
+}
+
+fn csv_writer() -> String {
+    String::from(
+        "segment,iteration,env_steps,train_return,validation_score,worker_policy_loss,worker_value_loss,worker_entropy,manager_policy_loss,manager_value_loss,manager_entropy,goals_reached,traversal_share\n",
+    )
+}
+
+fn mean_row(stats: &[IterationStats]) -> MetricsRow {
+    let n = stats.len().max(1) as f64;
+    let with_episodes: Vec<&IterationStats> = stats.iter().filter(|s| s.episodes > 0).collect();
+    let episodes: usize = with_episodes.iter().map(|s| s.episodes).sum();
+    let intervals: usize = stats.iter().map(|s| s.intervals).sum();
+    MetricsRow {
+        train_return: if episodes > 0 {
+            with_episodes.iter().map(|s| s.mean_return * s.episodes as f64).sum::<f64>() / episodes as f64
+        } else {
+            0.0
+        },
+        worker_policy_loss: stats.iter().map(|s| s.worker.policy_loss).sum::<f64>() / n,
+        worker_value_loss: stats.iter().map(|s| s.worker.value_loss).sum::<f64>() / n,
+        worker_entropy: stats.iter().map(|s| s.worker.entropy).sum::<f64>() / n,
+        manager_policy_loss: stats.iter().map(|s| s.manager.policy_loss).sum::<f64>() / n,
+        manager_value_loss: stats.iter().map(|s| s.manager.value_loss).sum::<f64>() / n,
+        manager_entropy: stats.iter().map(|s| s.manager.entropy).sum::<f64>() / n,
+        goals_reached: if intervals > 0 {
+            stats.iter().map(|s| s.goals_reached * s.intervals as f64).sum::<f64>() / intervals as f64
+        } else {
+            0.0
+        },
+        traversal_share: stats.iter().map(|s| s.traversal_share).sum::<f64>() / n,
+        ..MetricsRow::default()
+    }
+}
+
+/// Runs `worldgraph train`.
+pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
+    anyhow::ensure!(a.seed < MAX_TRAIN_SEED, "--seed must be below {MAX_TRAIN_SEED} (higher streams hold the validation and test seeds)");
+    let mut cfg = match &a.config {
+        Some(p) => read_config(p)?,
+        None => TrainConfig::default(),
+    };
+    cfg.agent = agent_config(&a, &cfg.agent);
+    if let Some(s) = a.env_steps {
+        cfg.env_steps = s;
+    }
+    cfg.agent.validate()?;
+    anyhow::ensure!(cfg.eval_every > 0, "eval_every must be at least 1");
+    anyhow::ensure!(cfg.validation_seeds > 0 && cfg.test_seeds > 0, "validation_seeds and test_seeds must be at least 1");
+    let layout = a.maze.layout(a.task.uses_door_key_layout());
+    let env_cfg = EnvConfig::for_task(a.task, &layout);
+    let dir = run_dir(&a, &layout, &cfg.agent);
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let world_graph = match &a.world_graph {
+        Some(p) => Some(std::fs::canonicalize(p).with_context(|| format!("no discovery run at {}", p.display()))?),
+        None => None,
+    };
+    let identity = RunIdentity {
+        maze: layout.name.clone(),
+        task: a.task,
+        seed: a.seed,
+        world_graph: world_graph.as_ref().map(|p| p.display().to_string()),
+        config: TrainConfig {
+            env_steps: 0,
+            ..cfg.clone()
+        },
+    };
+    write_atomic(&dir.join("config.toml"), toml::to_string(&cfg)?.as_bytes())?;
+    write_atomic(
+        &dir.join("seeds.json"),
+        &serde_json::to_vec_pretty(&serde_json::json!({
+            "train": {"seed": a.seed, "environments": cfg.agent.envs, "streams": format!("({}, 0..{})", a.seed, cfg.agent.envs)},
+            "validation": {"stream": VALIDATION_STREAM, "seeds": format!("0..{}", cfg.validation_seeds)},
+            "test": {"stream": TEST_STREAM, "seeds": format!("0..{}", cfg.test_seeds)},
+        }))?,
+    )?;
+
+    let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
+    let mut state = RunState {
+        identity: identity.clone(),
+        segments_done: 0,
+        env_steps: 0,
+        best_score: None,
+        best_segment: 0,
+        rows: Vec::new(),
+        wall_seconds: Vec::new(),
+    };
+    let state_path = dir.join("checkpoint").join("state.json");
+    if state_path.exists() {
+        let old: RunState = serde_json::from_slice(&std::fs::read(&state_path)?)
+            .with_context(|| format!("{} is not a training state", state_path.display()))?;
+        if old.identity != identity {
+            bail!(
+                "{} holds another run ({}); use another --run",
+                dir.display(),
+                identity_diff(&old.identity, &identity)
+            );
+        }
+        let weights = dir.join("checkpoint").join(format!("agent-{}.ot", old.segments_done));
+        agent.load_bytes(&std::fs::read(&weights).with_context(|| format!("cannot read {}", weights.display()))?, &weights)?;
+        eprintln!("train: resuming {} after {} env steps", dir.display(), old.env_steps);
+        state = old;
+    }
+    let mut best_bytes: Option<Vec<u8>> = None;
+
+    let mut env = InProcess::new(layout.clone(), env_cfg, cfg.agent.envs, a.seed, 1)?;
+    let mut val_env = eval_env(&layout, env_cfg, VALIDATION_STREAM, 0, cfg.validation_seeds)?;
+    let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
+    let iters_per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1);
+    let segments = cfg.env_steps.div_ceil(iters_per_segment * steps_per_iter);
+    let bar = crate::progress::bar(segments * iters_per_segment, "train");
+    bar.set_position(state.segments_done * iters_per_segment);
+    let started = Instant::now();
+    let mut wall_before: f64 = state.wall_seconds.last().copied().unwrap_or(0.0);
+    while state.segments_done < segments {
+        let seg_start = Instant::now();
+        agent.start_segment(&mut env, state.segments_done)?;
+        let mut stats = Vec::with_capacity(iters_per_segment as usize);
+        for _ in 0..iters_per_segment {
+            let s = agent.train_iteration(&mut env)?;
+            bar.inc(1);
+            bar.set_message(format!(
+                "return {:.2}  validation {}",
+                s.mean_return,
+                state.rows.last().map_or("-".to_string(), |r| format!("{:.2}", r.validation_score))
+            ));
+            stats.push(s);
+        }
+        let val = agent.evaluate(&mut val_env, state.segments_done, None)?;
+        state.segments_done += 1;
+        state.env_steps += iters_per_segment * steps_per_iter;
+        let mut row = mean_row(&stats);
+        row.segment = state.segments_done;
+        row.iteration = state.segments_done * iters_per_segment;
+        row.env_steps = state.env_steps;
+        row.validation_score = val.score;
+        crate::progress::note(
+            &bar,
+            &format!(
+                "segment {}/{}: {} env steps, train return {:.3}, validation {:.3}",
+                state.segments_done, segments, state.env_steps, row.train_return, row.validation_score
+            ),
+        );
+        state.rows.push(row);
+        wall_before += seg_start.elapsed().as_secs_f64();
+        state.wall_seconds.push(wall_before);
+        best_bytes = None;
+        if state.best_score.is_none_or(|b| val.score > b) {
+            state.best_score = Some(val.score);
+            state.best_segment = state.segments_done;
+            best_bytes = Some(agent.to_bytes()?);
+        }
+        save_state(&dir, &state, &agent, best_bytes.as_deref())?;
+    }
+    bar.finish_and_clear();
+    let _ = started;
+    let _ = best_bytes;
+
+    // The best checkpoint on the held-out test seeds.
+    let best = dir.join("checkpoint").join("best.ot");
+    agent.load_bytes(&std::fs::read(&best).with_context(|| format!("cannot read {}", best.display()))?, &best)?;
+    let mut test_env = eval_env(&layout, env_cfg, TEST_STREAM, 0, cfg.test_seeds)?;
+    let mut trace = EpisodeTrace::default();
+    let test = agent.evaluate(&mut test_env, u64::MAX, Some(&mut trace))?;
+    let wall = state.wall_seconds.last().copied().unwrap_or(0.0);
+    let summary = TestSummary {
+        agent: cfg.agent.name(),
+        maze: layout.name.clone(),
+        task: a.task.name().to_string(),
+        seed: a.seed,
+        test_score: test.score,
+        test_return: test.mean_return,
+        test_success_rate: test.success_rate,
+        test_stream: TEST_STREAM,
+        test_seeds: cfg.test_seeds,
+        validation_stream: VALIDATION_STREAM,
+        validation_seeds: cfg.validation_seeds,
+        best_validation: state.best_score.unwrap_or(0.0),
+        best_env_steps: state.best_segment * iters_per_segment * steps_per_iter,
+        env_steps: state.env_steps,
+        wall_seconds: wall,
+        train_steps_per_sec: state.env_steps as f64 / wall.max(1e-9),
+        validation_curve: state.rows.iter().map(|r| (r.env_steps, r.validation_score)).collect(),
+    };
+    write_atomic(&dir.join("test.json"), &serde_json::to_vec_pretty(&summary)?)?;
+    write_atomic(&dir.join("test_episode.json"), &serde_json::to_vec(&trace)?)?;
+    curves(&state.rows, &summary).render(900, 520).save_png(&dir.join("curves.png"))?;
+    episode_picture(&layout, &trace, agent.graph()).save_png(&dir.join("episode.png"))?;
+    if a.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        print_summary(&summary, &test, &dir);
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+fn identity_diff(old: &RunIdentity, new: &RunIdentity) -> String {
+    let a = serde_json::to_value(old).unwrap_or_default();
+    let b = serde_json::to_value(new).unwrap_or_default();
+    let mut diffs = Vec::new();
+    fn walk(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        match (a, b) {
+            (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+                for (k, v) in x {
+                    let p = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                    walk(&p, v, y.get(k).unwrap_or(&serde_json::Value::Null), out);
+                }
+            }
+            _ if a != b => out.push(format!("{path}: {a} there, {b} here")),
+            _ => {}
+        }
+    }
+    walk("", &a, &b, &mut diffs);
+    diffs.join("; ")
+}
+
+fn curves(rows: &[MetricsRow], s: &TestSummary) -> LineChart {
+    LineChart {
+        title: format!("{} on {} {} (seed {})", s.agent, s.maze, s.task, s.seed),
+        x_label: "env steps".into(),
+        y_label: "score".into(),
+        series: vec![
+            Series {
+                name: "validation score".into(),
+                points: rows.iter().map(|r| (r.env_steps as f64, r.validation_score)).collect(),
+            },
+            Series {
+                name: "training return".into(),
+                points: rows.iter().map(|r| (r.env_steps as f64, r.train_return)).collect(),
+            },
+            Series {
+                name: "worker goals reached".into(),
+                points: rows.iter().map(|r| (r.env_steps as f64, r.goals_reached)).collect(),
+            },
+        ],
+        x_scale: XScale::Linear,
+    }
+}
+
+/// The maze with one test episode: the agent's path (red where the Worker
+/// acted, light blue where the world graph was traversed), the wide goals
+/// (solid blue squares) and narrow goals (light blue squares), and the
+/// graph's nodes (the paper's Figure 1, bottom).
+pub fn episode_picture(layout: &Layout, t: &EpisodeTrace, graph: Option<&planner::WorldGraph>) -> Canvas {
+    let px = 28usize;
+    let mut c = Canvas::new(layout.width * px, layout.height * px, [255, 255, 255]);
+    draw_grid(&mut c, &layout.cells, layout.width, 0, 0, px);
+    let centre = |cell: u32| {
+        let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
+        ((x as f32 + 0.5) * px as f32, (y as f32 + 0.5) * px as f32)
+    };
+    let corner = |cell: u32| ((cell as usize % layout.width * px) as i64, (cell as usize / layout.width * px) as i64);
+    if let Some(g) = graph {
+        for n in g.nodes() {
+            let (x, y) = centre(n.0);
+            c.fill_disc(x, y, px as f32 * 0.18, [90, 90, 200], 0.5);
+        }
+    }
+    for &(_, gw, gn) in &t.goals {
+        let (x, y) = corner(gn);
+        c.fill_rect(x + 3, y + 3, px as i64 - 6, px as i64 - 6, [120, 190, 255], 0.55);
+        let (x, y) = corner(gw);
+        c.fill_rect(x + 5, y + 5, px as i64 - 10, px as i64 - 10, [20, 60, 220], 0.8);
+    }
+    for (k, w) in t.cells.windows(2).enumerate() {
+        let traversed = t.traversed.get(k).copied().unwrap_or(false);
+        let colour = if traversed { [100, 180, 255] } else { [220, 30, 40] };
+        c.line(centre(w[0]), centre(w[1]), if traversed { 5.0 } else { 3.0 }, colour, 0.8);
+    }
+    if let Some(&first) = t.cells.first() {
+        let (x, y) = centre(first);
+        c.fill_disc(x, y, px as f32 * 0.3, [220, 30, 40], 1.0);
+    }
+    c
+}
+
+fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
+    println!("stage 2: {} on the {} maze, {} (seed {}) — {}", s.agent, s.maze, s.task, s.seed, dir.display());
+    let rows = [
+        ("test score (best checkpoint, 100 held-out seeds)", format!("{:.3}", s.test_score)),
+        ("test mean return", format!("{:.3}", s.test_return)),
+        ("test success rate", format!("{:.3}", s.test_success_rate)),
+        ("best validation score", format!("{:.3}", s.best_validation)),
+        ("env steps at the best checkpoint", s.best_env_steps.to_string()),
+        ("env steps trained", s.env_steps.to_string()),
+        ("wall seconds (training)", format!("{:.1}", s.wall_seconds)),
+        ("training env-steps/s", format!("{:.0}", s.train_steps_per_sec)),
+        ("share of test steps traversing", format!("{:.3}", test.traversal_share)),
+    ];
+    println!("  {:<50} {:>12}", "figure", "value");
+    for (k, v) in rows {
+        println!("  {k:<50} {v:>12}");
+    }
+    println!("  files: config.toml metrics.csv curves.png test.json episode.png");
+}
+
+/// `evaluate` options.
+#[derive(Debug, Clone, Args)]
+pub struct EvaluateArgs {
+    /// A `worldgraph train` run directory.
+    pub run: PathBuf,
+    /// Test seeds as `A..B` (B exclusive), environments `(test stream, A..B)`.
+    #[arg(long, default_value = "0..100")]
+    pub seeds: String,
+    /// Episodes per seed (the seed fixes the maze's randomness; the policy's
+    /// sampling differs between episodes).
+    #[arg(long, default_value_t = 1)]
+    pub episodes_per_seed: usize,
+    /// Write a picture of the first episode here.
+    #[arg(long)]
+    pub picture: Option<PathBuf>,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `worldgraph evaluate`.
+pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
+    let (first, end) = a
+        .seeds
+        .split_once("..")
+        .and_then(|(x, y)| Some((x.trim().parse::<u64>().ok()?, y.trim().parse::<u64>().ok()?)))
+        .with_context(|| format!("--seeds {:?} is not A..B", a.seeds))?;
+    anyhow::ensure!(end > first, "--seeds {:?} is empty", a.seeds);
+    anyhow::ensure!(a.episodes_per_seed > 0, "--episodes-per-seed must be at least 1");
+    let state_path = a.run.join("checkpoint").join("state.json");
+    let state: RunState = serde_json::from_slice(
+        &std::fs::read(&state_path).with_context(|| format!("{} is not a train run (no {})", a.run.display(), state_path.display()))?,
+    )?;
+    let id = &state.identity;
+    let maze: Maze = id.maze.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+    let layout = maze.layout(id.task.uses_door_key_layout());
+    let env_cfg = EnvConfig::for_task(id.task, &layout);
+    let mut agent = build_agent(&id.config.agent, &layout, id.task, id.world_graph.as_deref().map(Path::new), id.seed)?;
+    let best = a.run.join("checkpoint").join("best.ot");
+    agent.load_bytes(&std::fs::read(&best).with_context(|| format!("cannot read {}", best.display()))?, &best)?;
+    let mut env = eval_env(&layout, env_cfg, TEST_STREAM, first, (end - first) as usize)?;
+    let mut scores = Vec::new();
+    let mut trace = EpisodeTrace::default();
+    for k in 0..a.episodes_per_seed {
+        let t = (k == 0).then_some(&mut trace);
+        let r = if k == 0 {
+            agent.evaluate(&mut env, u64::MAX, t)?
+        } else {
+            agent.evaluate(&mut env, k as u64, None)?
+        };
+        scores.push(r.score);
+    }
+    let score = scores.iter().sum::<f64>() / scores.len() as f64;
+    if let Some(p) = &a.picture {
+        episode_picture(&layout, &trace, agent.graph()).save_png(p)?;
+    }
+    if a.json {
+        println!("{}", serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores}));
+    } else {
+        println!(
+            "{}: score {:.3} on test seeds {} ({} episode(s) per seed)",
+            a.run.display(),
+            score,
+            a.seeds,
+            a.episodes_per_seed
+        );
+    }
+    let _ = BatchEnvironment::num_envs(&env);
+    Ok(std::process::ExitCode::SUCCESS)
+}
