@@ -11,8 +11,8 @@ use clap::{Parser, Subcommand};
 
 mod commands;
 mod latency;
-mod progress;
 mod pipeline;
+mod progress;
 mod roles;
 mod world;
 

@@ -6,3 +6,5 @@ mod cli;
 mod discover;
 // The three processes over shared memory: exchange, refusal, death and rejoin.
 mod pipeline;
+// Stage 2: the protocol's files, determinism, kill and resume, refusals.
+mod train;

@@ -74,8 +74,9 @@ pub fn sample_categorical(rng: &mut SmallRng, probs: &Tensor, greedy: bool) -> V
 /// an index (for choice sets larger than 256: a Manager's subgoal cells).
 pub fn sample_index(rng: &mut SmallRng, probs: &Tensor) -> Vec<usize> {
     let width = probs.size()[1] as usize;
-    let flat: Vec<f32> = tch::no_grad(|| Vec::try_from(probs.to_kind(Kind::Float).contiguous().flatten(0, -1)))
-        .expect("invariant: probabilities convert to a float vector");
+    let flat: Vec<f32> =
+        tch::no_grad(|| Vec::try_from(probs.to_kind(Kind::Float).contiguous().flatten(0, -1)))
+            .expect("invariant: probabilities convert to a float vector");
     flat.chunks_exact(width)
         .map(|p| {
             let u: f32 = rng.random();

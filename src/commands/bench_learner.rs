@@ -192,7 +192,11 @@ fn build(
                 cfg.traversal = true;
             }
             let graph = if cfg.needs_graph() {
-                Some(WorldGraphInputs::random_for_bench(&layout, env_cfg.task, a.world.seed)?)
+                Some(WorldGraphInputs::random_for_bench(
+                    &layout,
+                    env_cfg.task,
+                    a.world.seed,
+                )?)
             } else {
                 None
             };
@@ -242,7 +246,9 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(a.threads > 0, "--threads must be at least 1");
     anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
     tch::set_num_threads(a.threads);
-    let rollout = a.rollout.unwrap_or(if a.agent == BenchAgent::Gcp { 16 } else { 60 });
+    let rollout = a
+        .rollout
+        .unwrap_or(if a.agent == BenchAgent::Gcp { 16 } else { 60 });
     anyhow::ensure!(rollout > 0, "--rollout must be at least 1");
     let (mut fast, mut fast_env) = build(&a, GradPath::Recompute, rollout)?;
     let (mut plain, mut plain_env) = build(&a, GradPath::PerStep, rollout)?;
@@ -340,7 +346,17 @@ fn print_table(r: &LearnerBenchReport) {
     );
     println!(
         "{:<8} {:>14} {:>9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7} {:>12} {:>9}",
-        "path", "env-steps/s", "step", "encode", "act", "loss", "bwd", "other", "", "FLOP/step", "GFLOP/s"
+        "path",
+        "env-steps/s",
+        "step",
+        "encode",
+        "act",
+        "loss",
+        "bwd",
+        "other",
+        "",
+        "FLOP/step",
+        "GFLOP/s"
     );
     for (name, f) in [("fast", &r.fast), ("plain", &r.plain)] {
         let p = &f.phases;

@@ -16,7 +16,10 @@ use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::gcp::{GcpConfig, GoalConditionedPolicy};
-use learner::hrl::{AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, HrlAgent, IterationStats, WorldGraphInputs};
+use learner::hrl::{
+    AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, HrlAgent, IterationStats,
+    WorldGraphInputs,
+};
 use serde::{Deserialize, Serialize};
 use sim::chart::{LineChart, Series, XScale};
 use sim::render::{Canvas, draw_grid, write_atomic};
@@ -261,17 +264,22 @@ fn agent_config(a: &TrainArgs, base: &AgentConfig) -> AgentConfig {
 
 /// Reads a TOML config file.
 pub fn read_config(path: &Path) -> anyhow::Result<TrainConfig> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("{} is not a valid training config", path.display()))
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    toml::from_str(&text)
+        .with_context(|| format!("{} is not a valid training config", path.display()))
 }
 
 /// `π_g` of a discovery run, for `layout` (its weights fit any layout of
 /// the same size).
 pub fn load_gcp(dir: &Path, layout: &Layout) -> anyhow::Result<GoalConditionedPolicy> {
     let cfg_path = dir.join("pi_g.json");
-    let cfg: GcpConfig = serde_json::from_slice(
-        &std::fs::read(&cfg_path).with_context(|| format!("cannot read {} (a discover run writes it)", cfg_path.display()))?,
-    )
+    let cfg: GcpConfig = serde_json::from_slice(&std::fs::read(&cfg_path).with_context(|| {
+        format!(
+            "cannot read {} (a discover run writes it)",
+            cfg_path.display()
+        )
+    })?)
     .with_context(|| format!("{} is not a π_g config", cfg_path.display()))?;
     let mut gcp = GoalConditionedPolicy::new(&cfg, layout, 1, Task::MultiGoal.num_actions(), 0)?;
     gcp.load(dir.join("pi_g.ot"))?;
@@ -291,13 +299,18 @@ pub fn world_graph_for(
     gcp: &mut GoalConditionedPolicy,
 ) -> anyhow::Result<planner::WorldGraph> {
     let path = dir.join("graph.json");
-    let discovered = planner::WorldGraph::load(&path).with_context(|| format!("cannot load the world graph {}", path.display()))?;
+    let discovered = planner::WorldGraph::load(&path)
+        .with_context(|| format!("cannot load the world graph {}", path.display()))?;
     let same_layout = discovered.layout().cells == layout.cells;
     let pivotal: Vec<u32> = discovered
         .nodes()
         .iter()
         .map(|c| c.0)
-        .filter(|&c| planner::pivotal::is_node_object(layout.object(c as usize % layout.width, c as usize / layout.width)))
+        .filter(|&c| {
+            planner::pivotal::is_node_object(
+                layout.object(c as usize % layout.width, c as usize / layout.width),
+            )
+        })
         .collect();
     if candidates == Candidates::Pivotal && same_layout && task != Task::DoorKey {
         return Ok(discovered);
@@ -309,7 +322,11 @@ pub fn world_graph_for(
     let cfg = planner::PlannerConfig {
         candidates: planner::CandidateSet::Given,
         seed,
-        task: if task == Task::DoorKey { Task::DoorKey } else { Task::MultiGoal },
+        task: if task == Task::DoorKey {
+            Task::DoorKey
+        } else {
+            Task::MultiGoal
+        },
         shorten: false,
         ..planner::PlannerConfig::default()
     };
@@ -326,16 +343,28 @@ pub fn build_agent(
     world_graph: Option<&Path>,
     seed: u64,
 ) -> anyhow::Result<HrlAgent> {
-    let needs_run = cfg.needs_graph() || cfg.init_from_gcp || (cfg.traversal && task == Task::MultiGoalStochastic);
+    let needs_run = cfg.needs_graph()
+        || cfg.init_from_gcp
+        || (cfg.traversal && task == Task::MultiGoalStochastic);
     let inputs = match world_graph {
         Some(dir) => {
             let mut gcp = load_gcp(dir, layout)?;
             let graph = if cfg.needs_graph() {
-                Some(world_graph_for(dir, layout, task, cfg.candidates, seed, &mut gcp)?)
+                Some(world_graph_for(
+                    dir,
+                    layout,
+                    task,
+                    cfg.candidates,
+                    seed,
+                    &mut gcp,
+                )?)
             } else {
                 None
             };
-            Some(WorldGraphInputs { graph, gcp: Some(gcp) })
+            Some(WorldGraphInputs {
+                graph,
+                gcp: Some(gcp),
+            })
         }
         None if needs_run => bail!(
             "{} needs --world-graph DISCOVER_RUN (its V_p and π_g); run `worldgraph discover --maze ...` first",
@@ -348,21 +377,42 @@ pub fn build_agent(
 
 /// Evaluation environments: `count` seeds of `stream` from `first`, one
 /// episode each.
-pub fn eval_env(layout: &Layout, env_cfg: EnvConfig, stream: u64, first: u64, count: usize) -> anyhow::Result<InProcess> {
-    let batch = BatchEnv::with_first_index(layout.clone(), env_cfg, first as usize, count, stream, 1)?;
+pub fn eval_env(
+    layout: &Layout,
+    env_cfg: EnvConfig,
+    stream: u64,
+    first: u64,
+    count: usize,
+) -> anyhow::Result<InProcess> {
+    let batch =
+        BatchEnv::with_first_index(layout.clone(), env_cfg, first as usize, count, stream, 1)?;
     Ok(InProcess::from_batch(batch))
 }
 
 fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
     a.run.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("train-{}-{}-{}-{}", layout.name, a.task.name(), cfg.name(), a.seed))
+        PathBuf::from("runs").join(format!(
+            "train-{}-{}-{}-{}",
+            layout.name,
+            a.task.name(),
+            cfg.name(),
+            a.seed
+        ))
     })
 }
 
-fn save_state(dir: &Path, state: &RunState, agent: &HrlAgent, best: Option<&[u8]>) -> anyhow::Result<()> {
+fn save_state(
+    dir: &Path,
+    state: &RunState,
+    agent: &HrlAgent,
+    best: Option<&[u8]>,
+) -> anyhow::Result<()> {
     let ckpt = dir.join("checkpoint");
     std::fs::create_dir_all(&ckpt).with_context(|| format!("cannot create {}", ckpt.display()))?;
-    write_atomic(&ckpt.join(format!("agent-{}.ot", state.segments_done)), &agent.to_bytes()?)?;
+    write_atomic(
+        &ckpt.join(format!("agent-{}.ot", state.segments_done)),
+        &agent.to_bytes()?,
+    )?;
     if let Some(b) = best {
         write_atomic(&ckpt.join("best.ot"), b)?;
     }
@@ -417,7 +467,11 @@ fn mean_row(stats: &[IterationStats]) -> MetricsRow {
     let intervals: usize = stats.iter().map(|s| s.intervals).sum();
     MetricsRow {
         train_return: if episodes > 0 {
-            with_episodes.iter().map(|s| s.mean_return * s.episodes as f64).sum::<f64>() / episodes as f64
+            with_episodes
+                .iter()
+                .map(|s| s.mean_return * s.episodes as f64)
+                .sum::<f64>()
+                / episodes as f64
         } else {
             0.0
         },
@@ -428,7 +482,11 @@ fn mean_row(stats: &[IterationStats]) -> MetricsRow {
         manager_value_loss: stats.iter().map(|s| s.manager.value_loss).sum::<f64>() / n,
         manager_entropy: stats.iter().map(|s| s.manager.entropy).sum::<f64>() / n,
         goals_reached: if intervals > 0 {
-            stats.iter().map(|s| s.goals_reached * s.intervals as f64).sum::<f64>() / intervals as f64
+            stats
+                .iter()
+                .map(|s| s.goals_reached * s.intervals as f64)
+                .sum::<f64>()
+                / intervals as f64
         } else {
             0.0
         },
@@ -439,7 +497,10 @@ fn mean_row(stats: &[IterationStats]) -> MetricsRow {
 
 /// Runs `worldgraph train`.
 pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
-    anyhow::ensure!(a.seed < MAX_TRAIN_SEED, "--seed must be below {MAX_TRAIN_SEED} (higher streams hold the validation and test seeds)");
+    anyhow::ensure!(
+        a.seed < MAX_TRAIN_SEED,
+        "--seed must be below {MAX_TRAIN_SEED} (higher streams hold the validation and test seeds)"
+    );
     let mut cfg = match &a.config {
         Some(p) => read_config(p)?,
         None => TrainConfig::default(),
@@ -450,13 +511,19 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     }
     cfg.agent.validate()?;
     anyhow::ensure!(cfg.eval_every > 0, "eval_every must be at least 1");
-    anyhow::ensure!(cfg.validation_seeds > 0 && cfg.test_seeds > 0, "validation_seeds and test_seeds must be at least 1");
+    anyhow::ensure!(
+        cfg.validation_seeds > 0 && cfg.test_seeds > 0,
+        "validation_seeds and test_seeds must be at least 1"
+    );
     let layout = a.maze.layout(a.task.uses_door_key_layout());
     let env_cfg = EnvConfig::for_task(a.task, &layout);
     let dir = run_dir(&a, &layout, &cfg.agent);
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let world_graph = match &a.world_graph {
-        Some(p) => Some(std::fs::canonicalize(p).with_context(|| format!("no discovery run at {}", p.display()))?),
+        Some(p) => Some(
+            std::fs::canonicalize(p)
+                .with_context(|| format!("no discovery run at {}", p.display()))?,
+        ),
         None => None,
     };
     let identity = RunIdentity {
@@ -473,7 +540,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     write_atomic(
         &dir.join("seeds.json"),
         &serde_json::to_vec_pretty(&serde_json::json!({
-            "train": {"seed": a.seed, "environments": cfg.agent.envs, "streams": format!("({}, 0..{})", a.seed, cfg.agent.envs)},
+            "train": {"seed": a.seed, "environments": cfg.agent.envs, "streams": format!("segment s: (env_seed({}, s), 0..{})", a.seed, cfg.agent.envs)},
             "validation": {"stream": VALIDATION_STREAM, "seeds": format!("0..{}", cfg.validation_seeds)},
             "test": {"stream": TEST_STREAM, "seeds": format!("0..{}", cfg.test_seeds)},
         }))?,
@@ -500,15 +567,23 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                 identity_diff(&old.identity, &identity)
             );
         }
-        let weights = dir.join("checkpoint").join(format!("agent-{}.ot", old.segments_done));
-        agent.load_bytes(&std::fs::read(&weights).with_context(|| format!("cannot read {}", weights.display()))?, &weights)?;
-        eprintln!("train: resuming {} after {} env steps", dir.display(), old.env_steps);
+        let weights = dir
+            .join("checkpoint")
+            .join(format!("agent-{}.ot", old.segments_done));
+        agent.load_bytes(
+            &std::fs::read(&weights)
+                .with_context(|| format!("cannot read {}", weights.display()))?,
+            &weights,
+        )?;
+        eprintln!(
+            "train: resuming {} after {} env steps",
+            dir.display(),
+            old.env_steps
+        );
         state = old;
     }
     let mut best_bytes: Option<Vec<u8>> = None;
 
-    let mut env = InProcess::new(layout.clone(), env_cfg, cfg.agent.envs, a.seed, 1)?;
-    let mut val_env = eval_env(&layout, env_cfg, VALIDATION_STREAM, 0, cfg.validation_seeds)?;
     let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
     let iters_per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1);
     let segments = cfg.env_steps.div_ceil(iters_per_segment * steps_per_iter);
@@ -518,6 +593,16 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut wall_before: f64 = state.wall_seconds.last().copied().unwrap_or(0.0);
     while state.segments_done < segments {
         let seg_start = Instant::now();
+        // A segment is a function of the checkpoint: fresh environments
+        // seeded by (seed, segment), so a resumed run repeats the
+        // uninterrupted one.
+        let mut env = InProcess::new(
+            layout.clone(),
+            env_cfg,
+            cfg.agent.envs,
+            sim::env_seed(a.seed, state.segments_done),
+            1,
+        )?;
         agent.start_segment(&mut env, state.segments_done)?;
         let mut stats = Vec::with_capacity(iters_per_segment as usize);
         for _ in 0..iters_per_segment {
@@ -526,10 +611,16 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             bar.set_message(format!(
                 "return {:.2}  validation {}",
                 s.mean_return,
-                state.rows.last().map_or("-".to_string(), |r| format!("{:.2}", r.validation_score))
+                state
+                    .rows
+                    .last()
+                    .map_or("-".to_string(), |r| format!("{:.2}", r.validation_score))
             ));
             stats.push(s);
         }
+        // The same validation episodes every time: fresh environments of
+        // the validation seeds.
+        let mut val_env = eval_env(&layout, env_cfg, VALIDATION_STREAM, 0, cfg.validation_seeds)?;
         let val = agent.evaluate(&mut val_env, state.segments_done, None)?;
         state.segments_done += 1;
         state.env_steps += iters_per_segment * steps_per_iter;
@@ -542,7 +633,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             &bar,
             &format!(
                 "segment {}/{}: {} env steps, train return {:.3}, validation {:.3}",
-                state.segments_done, segments, state.env_steps, row.train_return, row.validation_score
+                state.segments_done,
+                segments,
+                state.env_steps,
+                row.train_return,
+                row.validation_score
             ),
         );
         state.rows.push(row);
@@ -562,7 +657,10 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
 
     // The best checkpoint on the held-out test seeds.
     let best = dir.join("checkpoint").join("best.ot");
-    agent.load_bytes(&std::fs::read(&best).with_context(|| format!("cannot read {}", best.display()))?, &best)?;
+    agent.load_bytes(
+        &std::fs::read(&best).with_context(|| format!("cannot read {}", best.display()))?,
+        &best,
+    )?;
     let mut test_env = eval_env(&layout, env_cfg, TEST_STREAM, 0, cfg.test_seeds)?;
     let mut trace = EpisodeTrace::default();
     let test = agent.evaluate(&mut test_env, u64::MAX, Some(&mut trace))?;
@@ -584,11 +682,20 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         env_steps: state.env_steps,
         wall_seconds: wall,
         train_steps_per_sec: state.env_steps as f64 / wall.max(1e-9),
-        validation_curve: state.rows.iter().map(|r| (r.env_steps, r.validation_score)).collect(),
+        validation_curve: state
+            .rows
+            .iter()
+            .map(|r| (r.env_steps, r.validation_score))
+            .collect(),
     };
-    write_atomic(&dir.join("test.json"), &serde_json::to_vec_pretty(&summary)?)?;
+    write_atomic(
+        &dir.join("test.json"),
+        &serde_json::to_vec_pretty(&summary)?,
+    )?;
     write_atomic(&dir.join("test_episode.json"), &serde_json::to_vec(&trace)?)?;
-    curves(&state.rows, &summary).render(900, 520).save_png(&dir.join("curves.png"))?;
+    curves(&state.rows, &summary)
+        .render(900, 520)
+        .save_png(&dir.join("curves.png"))?;
     episode_picture(&layout, &trace, agent.graph()).save_png(&dir.join("episode.png"))?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);
@@ -606,7 +713,11 @@ fn identity_diff(old: &RunIdentity, new: &RunIdentity) -> String {
         match (a, b) {
             (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
                 for (k, v) in x {
-                    let p = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                    let p = if path.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{path}.{k}")
+                    };
                     walk(&p, v, y.get(k).unwrap_or(&serde_json::Value::Null), out);
                 }
             }
@@ -626,15 +737,24 @@ fn curves(rows: &[MetricsRow], s: &TestSummary) -> LineChart {
         series: vec![
             Series {
                 name: "validation score".into(),
-                points: rows.iter().map(|r| (r.env_steps as f64, r.validation_score)).collect(),
+                points: rows
+                    .iter()
+                    .map(|r| (r.env_steps as f64, r.validation_score))
+                    .collect(),
             },
             Series {
                 name: "training return".into(),
-                points: rows.iter().map(|r| (r.env_steps as f64, r.train_return)).collect(),
+                points: rows
+                    .iter()
+                    .map(|r| (r.env_steps as f64, r.train_return))
+                    .collect(),
             },
             Series {
                 name: "worker goals reached".into(),
-                points: rows.iter().map(|r| (r.env_steps as f64, r.goals_reached)).collect(),
+                points: rows
+                    .iter()
+                    .map(|r| (r.env_steps as f64, r.goals_reached))
+                    .collect(),
             },
         ],
         x_scale: XScale::Linear,
@@ -645,7 +765,11 @@ fn curves(rows: &[MetricsRow], s: &TestSummary) -> LineChart {
 /// acted, light blue where the world graph was traversed), the wide goals
 /// (solid blue squares) and narrow goals (light blue squares), and the
 /// graph's nodes (the paper's Figure 1, bottom).
-pub fn episode_picture(layout: &Layout, t: &EpisodeTrace, graph: Option<&planner::WorldGraph>) -> Canvas {
+pub fn episode_picture(
+    layout: &Layout,
+    t: &EpisodeTrace,
+    graph: Option<&planner::WorldGraph>,
+) -> Canvas {
     let px = 28usize;
     let mut c = Canvas::new(layout.width * px, layout.height * px, [255, 255, 255]);
     draw_grid(&mut c, &layout.cells, layout.width, 0, 0, px);
@@ -653,7 +777,12 @@ pub fn episode_picture(layout: &Layout, t: &EpisodeTrace, graph: Option<&planner
         let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
         ((x as f32 + 0.5) * px as f32, (y as f32 + 0.5) * px as f32)
     };
-    let corner = |cell: u32| ((cell as usize % layout.width * px) as i64, (cell as usize / layout.width * px) as i64);
+    let corner = |cell: u32| {
+        (
+            (cell as usize % layout.width * px) as i64,
+            (cell as usize / layout.width * px) as i64,
+        )
+    };
     if let Some(g) = graph {
         for n in g.nodes() {
             let (x, y) = centre(n.0);
@@ -662,14 +791,38 @@ pub fn episode_picture(layout: &Layout, t: &EpisodeTrace, graph: Option<&planner
     }
     for &(_, gw, gn) in &t.goals {
         let (x, y) = corner(gn);
-        c.fill_rect(x + 3, y + 3, px as i64 - 6, px as i64 - 6, [120, 190, 255], 0.55);
+        c.fill_rect(
+            x + 3,
+            y + 3,
+            px as i64 - 6,
+            px as i64 - 6,
+            [120, 190, 255],
+            0.55,
+        );
         let (x, y) = corner(gw);
-        c.fill_rect(x + 5, y + 5, px as i64 - 10, px as i64 - 10, [20, 60, 220], 0.8);
+        c.fill_rect(
+            x + 5,
+            y + 5,
+            px as i64 - 10,
+            px as i64 - 10,
+            [20, 60, 220],
+            0.8,
+        );
     }
     for (k, w) in t.cells.windows(2).enumerate() {
         let traversed = t.traversed.get(k).copied().unwrap_or(false);
-        let colour = if traversed { [100, 180, 255] } else { [220, 30, 40] };
-        c.line(centre(w[0]), centre(w[1]), if traversed { 5.0 } else { 3.0 }, colour, 0.8);
+        let colour = if traversed {
+            [100, 180, 255]
+        } else {
+            [220, 30, 40]
+        };
+        c.line(
+            centre(w[0]),
+            centre(w[1]),
+            if traversed { 5.0 } else { 3.0 },
+            colour,
+            0.8,
+        );
     }
     if let Some(&first) = t.cells.first() {
         let (x, y) = centre(first);
@@ -679,17 +832,36 @@ pub fn episode_picture(layout: &Layout, t: &EpisodeTrace, graph: Option<&planner
 }
 
 fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
-    println!("stage 2: {} on the {} maze, {} (seed {}) — {}", s.agent, s.maze, s.task, s.seed, dir.display());
+    println!(
+        "stage 2: {} on the {} maze, {} (seed {}) — {}",
+        s.agent,
+        s.maze,
+        s.task,
+        s.seed,
+        dir.display()
+    );
     let rows = [
-        ("test score (best checkpoint, 100 held-out seeds)", format!("{:.3}", s.test_score)),
+        (
+            "test score (best checkpoint, 100 held-out seeds)",
+            format!("{:.3}", s.test_score),
+        ),
         ("test mean return", format!("{:.3}", s.test_return)),
         ("test success rate", format!("{:.3}", s.test_success_rate)),
         ("best validation score", format!("{:.3}", s.best_validation)),
-        ("env steps at the best checkpoint", s.best_env_steps.to_string()),
+        (
+            "env steps at the best checkpoint",
+            s.best_env_steps.to_string(),
+        ),
         ("env steps trained", s.env_steps.to_string()),
         ("wall seconds (training)", format!("{:.1}", s.wall_seconds)),
-        ("training env-steps/s", format!("{:.0}", s.train_steps_per_sec)),
-        ("share of test steps traversing", format!("{:.3}", test.traversal_share)),
+        (
+            "training env-steps/s",
+            format!("{:.0}", s.train_steps_per_sec),
+        ),
+        (
+            "share of test steps traversing",
+            format!("{:.3}", test.traversal_share),
+        ),
     ];
     println!("  {:<50} {:>12}", "figure", "value");
     for (k, v) in rows {
@@ -726,18 +898,35 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         .and_then(|(x, y)| Some((x.trim().parse::<u64>().ok()?, y.trim().parse::<u64>().ok()?)))
         .with_context(|| format!("--seeds {:?} is not A..B", a.seeds))?;
     anyhow::ensure!(end > first, "--seeds {:?} is empty", a.seeds);
-    anyhow::ensure!(a.episodes_per_seed > 0, "--episodes-per-seed must be at least 1");
+    anyhow::ensure!(
+        a.episodes_per_seed > 0,
+        "--episodes-per-seed must be at least 1"
+    );
     let state_path = a.run.join("checkpoint").join("state.json");
-    let state: RunState = serde_json::from_slice(
-        &std::fs::read(&state_path).with_context(|| format!("{} is not a train run (no {})", a.run.display(), state_path.display()))?,
-    )?;
+    let state: RunState =
+        serde_json::from_slice(&std::fs::read(&state_path).with_context(|| {
+            format!(
+                "{} is not a train run (no {})",
+                a.run.display(),
+                state_path.display()
+            )
+        })?)?;
     let id = &state.identity;
     let maze: Maze = id.maze.parse().map_err(|e: String| anyhow::anyhow!(e))?;
     let layout = maze.layout(id.task.uses_door_key_layout());
     let env_cfg = EnvConfig::for_task(id.task, &layout);
-    let mut agent = build_agent(&id.config.agent, &layout, id.task, id.world_graph.as_deref().map(Path::new), id.seed)?;
+    let mut agent = build_agent(
+        &id.config.agent,
+        &layout,
+        id.task,
+        id.world_graph.as_deref().map(Path::new),
+        id.seed,
+    )?;
     let best = a.run.join("checkpoint").join("best.ot");
-    agent.load_bytes(&std::fs::read(&best).with_context(|| format!("cannot read {}", best.display()))?, &best)?;
+    agent.load_bytes(
+        &std::fs::read(&best).with_context(|| format!("cannot read {}", best.display()))?,
+        &best,
+    )?;
     let mut env = eval_env(&layout, env_cfg, TEST_STREAM, first, (end - first) as usize)?;
     let mut scores = Vec::new();
     let mut trace = EpisodeTrace::default();
@@ -755,7 +944,10 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         episode_picture(&layout, &trace, agent.graph()).save_png(p)?;
     }
     if a.json {
-        println!("{}", serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores}));
+        println!(
+            "{}",
+            serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores})
+        );
     } else {
         println!(
             "{}: score {:.3} on test seeds {} ({} episode(s) per seed)",

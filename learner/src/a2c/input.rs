@@ -191,10 +191,8 @@ impl CellInput {
             .extend(obs.env_cells(i).iter().map(|&c| object_channel(c) as u8));
         let m = &obs.meta[i];
         let agent = m.y as usize * self.width + m.x as usize;
-        self.agents.push((
-            if agent < hw { agent as u32 } else { u32::MAX },
-            m.dir & 3,
-        ));
+        self.agents
+            .push((if agent < hw { agent as u32 } else { u32::MAX }, m.dir & 3));
         self.keys.push(m.carrying == sim::Object::Key as u8);
         if self.goal_channel {
             let g = goals.map_or(&[][..], |g| g.of(i));
@@ -217,7 +215,8 @@ impl CellInput {
     /// Appends observation `k` of `other` only.
     pub fn extend_one(&mut self, other: &CellInput, k: usize) {
         let hw = self.width * self.height;
-        self.codes.extend_from_slice(&other.codes[k * hw..(k + 1) * hw]);
+        self.codes
+            .extend_from_slice(&other.codes[k * hw..(k + 1) * hw]);
         self.agents.push(other.agents[k]);
         self.keys.push(other.keys[k]);
         if self.goal_channel {
@@ -264,13 +263,20 @@ impl CellInput {
 /// The first 3×3 convolution (stride 1, zero padding 1) of a
 /// [`CellInput`], `[N, out, H, W]`, equal to `conv2d` over the dense
 /// one-hot planes; `weight` is the `[out, C, 3, 3]` kernel.
-pub fn first_conv(input: &CellInput, weight: &Tensor, bias: Option<&Tensor>, layer: FirstLayer) -> Tensor {
+pub fn first_conv(
+    input: &CellInput,
+    weight: &Tensor,
+    bias: Option<&Tensor>,
+    layer: FirstLayer,
+) -> Tensor {
     let (w, h) = (input.width, input.height);
     let (n, hw) = (input.len(), w * h);
     let out = weight.size()[0];
     let y = match layer {
         FirstLayer::Dense => {
-            return input.to_dense().conv2d(weight, bias, [1, 1], [1, 1], [1, 1], 1);
+            return input
+                .to_dense()
+                .conv2d(weight, bias, [1, 1], [1, 1], [1, 1], 1);
         }
         FirstLayer::Gather => {
             // Each position's 3×3 neighbourhood of object channels (10 for
@@ -289,7 +295,8 @@ pub fn first_conv(input: &CellInput, weight: &Tensor, bias: Option<&Tensor>, lay
                         let mut p = key;
                         for (k, dy, dx) in CellInput::taps() {
                             let (qy, qx) = (y + dy, x + dx);
-                            let code = if (0..h as i64).contains(&qy) && (0..w as i64).contains(&qx) {
+                            let code = if (0..h as i64).contains(&qy) && (0..w as i64).contains(&qx)
+                            {
                                 u64::from(codes[(qy * w as i64 + qx) as usize])
                             } else {
                                 PAD_CODE
@@ -321,7 +328,9 @@ pub fn first_conv(input: &CellInput, weight: &Tensor, bias: Option<&Tensor>, lay
                 }
             }
             let table = weight.permute([1, 2, 3, 0]).reshape([rows, out]); // [C·9, out]
-            let m = Tensor::from_slice(&m).view([patterns.len() as i64, rows]).to_kind(weight.kind());
+            let m = Tensor::from_slice(&m)
+                .view([patterns.len() as i64, rows])
+                .to_kind(weight.kind());
             let mut y = m.matmul(&table).index_select(0, &Tensor::from_slice(&pid));
             // The agent's and the goals' few positions: for every cell q
             // they mark and every tap k with p = q − offset(k) inside.
@@ -351,7 +360,8 @@ pub fn first_conv(input: &CellInput, weight: &Tensor, bias: Option<&Tensor>, lay
                 let extra = table.index_select(0, &Tensor::from_slice(&rows));
                 y = y.index_add(0, &Tensor::from_slice(&pos), &extra);
             }
-            y.view([n as i64, h as i64, w as i64, out]).permute([0, 3, 1, 2])
+            y.view([n as i64, h as i64, w as i64, out])
+                .permute([0, 3, 1, 2])
         }
     };
     match bias {
@@ -452,7 +462,12 @@ mod tests {
             let mut input = CellInput::new(w, h, goals.is_some());
             input.push_obs(&obs, goals);
             assert_eq!(input.len(), n);
-            assert!(input.to_dense().to_kind(Kind::Double).equal(&encode_obs(&obs, goals).to_kind(Kind::Double)));
+            assert!(
+                input
+                    .to_dense()
+                    .to_kind(Kind::Double)
+                    .equal(&encode_obs(&obs, goals).to_kind(Kind::Double))
+            );
             let fast = first_conv(&input, &weight, Some(&bias), FirstLayer::Gather);
             (&fast * &upstream).sum(Kind::Float).backward();
             let (gw_fast, gb_fast) = (weight.grad().copy(), bias.grad().copy());

@@ -397,10 +397,12 @@ impl ActorCritic {
 /// `WORLDGRAPH_FIRST_LAYER=dense` (for measurements).
 pub fn first_layer() -> FirstLayer {
     static LAYER: std::sync::OnceLock<FirstLayer> = std::sync::OnceLock::new();
-    *LAYER.get_or_init(|| match std::env::var("WORLDGRAPH_FIRST_LAYER").as_deref() {
-        Ok("dense") => FirstLayer::Dense,
-        _ => FirstLayer::Gather,
-    })
+    *LAYER.get_or_init(
+        || match std::env::var("WORLDGRAPH_FIRST_LAYER").as_deref() {
+            Ok("dense") => FirstLayer::Dense,
+            _ => FirstLayer::Gather,
+        },
+    )
 }
 
 /// Multiply-adds of one trunk forward pass per observation, by layer:
@@ -409,7 +411,10 @@ pub fn first_layer() -> FirstLayer {
 pub fn trunk_macs(trunk: &Trunk, bag: Option<f64>) -> (f64, f64) {
     let (w, h) = trunk.grid();
     let hw = (w * h) as f64;
-    let [c1, c2] = [trunk.conv1.ws.size()[0] as f64, trunk.conv2.ws.size()[0] as f64];
+    let [c1, c2] = [
+        trunk.conv1.ws.size()[0] as f64,
+        trunk.conv2.ws.size()[0] as f64,
+    ];
     let cin = trunk.in_channels as f64;
     let hw2 = (((w + 1) / 2) * ((h + 1) / 2)) as f64;
     let hidden = trunk.hidden as f64;

@@ -82,10 +82,17 @@ impl Adam {
             let norm = grads
                 .iter()
                 .map(|g| g.square().sum(Kind::Float))
-                .fold(Tensor::zeros([], (Kind::Float, tch::Device::Cpu)), |a, b| a + b)
+                .fold(
+                    Tensor::zeros([], (Kind::Float, tch::Device::Cpu)),
+                    |a, b| a + b,
+                )
                 .sqrt()
                 .double_value(&[]);
-            let scale = if norm > max_norm { max_norm / (norm + 1e-6) } else { 1.0 };
+            let scale = if norm > max_norm {
+                max_norm / (norm + 1e-6)
+            } else {
+                1.0
+            };
             self.t += 1;
             let c1 = 1.0 - BETA1.powi(self.t as i32);
             let c2 = 1.0 - BETA2.powi(self.t as i32);
@@ -120,7 +127,11 @@ impl Adam {
                 let key = format!("adam/{which}/{name}");
                 let t = find(&key).ok_or_else(|| format!("no {key}"))?;
                 if t.size() != slot.size() {
-                    return Err(format!("{key} has shape {:?}, expected {:?}", t.size(), slot.size()));
+                    return Err(format!(
+                        "{key} has shape {:?}, expected {:?}",
+                        t.size(),
+                        slot.size()
+                    ));
                 }
                 *slot = t.copy();
             }

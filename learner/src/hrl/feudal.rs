@@ -103,7 +103,11 @@ pub struct Manager {
 
 impl Manager {
     /// A Manager under `p` (`encoder`, `core`, `value`, `head/...`).
-    pub fn new(p: &nn::Path, trunk: Trunk, head: impl FnOnce(&nn::Path, i64) -> ManagerHead) -> Manager {
+    pub fn new(
+        p: &nn::Path,
+        trunk: Trunk,
+        head: impl FnOnce(&nn::Path, i64) -> ManagerHead,
+    ) -> Manager {
         let hidden = trunk.hidden();
         let value = nn::linear(p / "value", hidden, 1, Default::default());
         let head = head(&(p / "head"), hidden);
@@ -175,7 +179,12 @@ impl Manager {
         gamma: f64,
     ) -> (Tensor, LossFigures, LstmState) {
         let b = queues.len();
-        let k_max = queues.iter().map(|q| q.decisions.len()).max().unwrap_or(0).max(1);
+        let k_max = queues
+            .iter()
+            .map(|q| q.decisions.len())
+            .max()
+            .unwrap_or(0)
+            .max(1);
         let template = &queues
             .iter()
             .find_map(|q| q.decisions.first())
@@ -200,7 +209,10 @@ impl Manager {
         for k in 0..k_max {
             for (e, q) in queues.iter().enumerate() {
                 let i = k * b + e;
-                let d = q.decisions.get(k).unwrap_or_else(|| q.decisions.last().expect("non-empty"));
+                let d = q
+                    .decisions
+                    .get(k)
+                    .unwrap_or_else(|| q.decisions.last().expect("non-empty"));
                 input.extend_one(&d.input, 0);
                 if k >= q.decisions.len() {
                     continue;
@@ -224,9 +236,9 @@ impl Manager {
         }
         let (k, bb) = (k_max as i64, b as i64);
         let features = self.trunk.features(&input).view([k, bb, -1]);
-        let (hs, cs) = self
-            .trunk
-            .unroll_states(&features, init, &Tensor::from_slice(&reset).view([k, bb]));
+        let (hs, cs) =
+            self.trunk
+                .unroll_states(&features, init, &Tensor::from_slice(&reset).view([k, bb]));
         let h = hs.view([k * bb, self.hidden]);
         let value = self.value.forward(&h).squeeze_dim(-1);
         let (log_prob, entropy) = match &self.head {
@@ -242,7 +254,13 @@ impl Manager {
                 &Tensor::from_slice(&narrow),
             ),
         };
-        let (adv, ret) = advantages(&rewards, &values, &discounts, &vec![0f32; b], cfg.gae_lambda as f32);
+        let (adv, ret) = advantages(
+            &rewards,
+            &values,
+            &discounts,
+            &vec![0f32; b],
+            cfg.gae_lambda as f32,
+        );
         let terms = PolicyTerms {
             log_prob,
             entropy,

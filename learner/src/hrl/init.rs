@@ -80,31 +80,58 @@ mod tests {
             num_actions: 6,
             ..gcp_cfg.clone()
         };
-        let _worker = crate::seeding::init_seeded(2, || ActorCritic::new(&worker_vs.root(), &worker_cfg, w, h));
+        let _worker = crate::seeding::init_seeded(2, || {
+            ActorCritic::new(&worker_vs.root(), &worker_cfg, w, h)
+        });
         let report = copy_from(&src, &worker_vs, &["encoder", "core", "policy", "value"]);
         let s = src.variables();
         let d = worker_vs.variables();
         for name in &report.copied {
             assert!(s[name].equal(&d[name]), "{name} not copied exactly");
         }
-        assert_eq!(report.partial, vec!["policy.bias".to_string(), "policy.weight".to_string()]);
-        assert!(d["policy.weight"].narrow(0, 0, 3).equal(&s["policy.weight"]));
-        assert!(!d["policy.weight"].narrow(0, 3, 3).equal(&Tensor::zeros([3, 16], (tch::Kind::Float, Device::Cpu))));
+        assert_eq!(
+            report.partial,
+            vec!["policy.bias".to_string(), "policy.weight".to_string()]
+        );
+        assert!(
+            d["policy.weight"]
+                .narrow(0, 0, 3)
+                .equal(&s["policy.weight"])
+        );
+        assert!(
+            !d["policy.weight"]
+                .narrow(0, 3, 3)
+                .equal(&Tensor::zeros([3, 16], (tch::Kind::Float, Device::Cpu)))
+        );
         assert_eq!(report.copied.len() + report.partial.len(), d.len());
 
         // A Manager trunk without the goal channel: the encoder is copied,
         // the first convolution without its goal plane; the core is not.
         let manager_vs = nn::VarStore::new(Device::Cpu);
-        let _m = Trunk::new(&manager_vs.root(), gcp_cfg.in_channels() - 1, [4, 8], 16, w, h);
+        let _m = Trunk::new(
+            &manager_vs.root(),
+            gcp_cfg.in_channels() - 1,
+            [4, 8],
+            16,
+            w,
+            h,
+        );
         let before = manager_vs.variables()["core.weight_ih_l0"].copy();
         let report = copy_from(&src, &manager_vs, &["encoder"]);
         let d = manager_vs.variables();
         assert_eq!(report.partial, vec!["encoder.conv1.weight".to_string()]);
         let planes = gcp_cfg.in_channels() - 1;
         assert!(d["encoder.conv1.weight"].equal(&s["encoder.conv1.weight"].narrow(1, 0, planes)));
-        for name in ["encoder.conv2.weight", "encoder.fc.weight", "encoder.fc.bias"] {
+        for name in [
+            "encoder.conv2.weight",
+            "encoder.fc.weight",
+            "encoder.fc.bias",
+        ] {
             assert!(d[name].equal(&s[name]), "{name}");
         }
-        assert!(d["core.weight_ih_l0"].equal(&before), "the Manager's core is its own");
+        assert!(
+            d["core.weight_ih_l0"].equal(&before),
+            "the Manager's core is its own"
+        );
     }
 }

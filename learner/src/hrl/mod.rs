@@ -46,7 +46,7 @@ use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
 use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
 use traversal::{Execution, Progress, Traversal};
-use wide_narrow::{Window, WideNarrowHead};
+use wide_narrow::{WideNarrowHead, Window};
 use worker::WorkerGoal;
 
 /// Which agent.
@@ -144,7 +144,10 @@ impl AgentConfig {
             return Err(ConfigError::new("rollout_len", "must be at least 1"));
         }
         if self.window != 0 && self.window % 2 == 0 {
-            return Err(ConfigError::new("window", format!("{} must be odd", self.window)));
+            return Err(ConfigError::new(
+                "window",
+                format!("{} must be odd", self.window),
+            ));
         }
         if self.conv_channels.iter().any(|&c| c < 1) || self.hidden < 1 {
             return Err(ConfigError::new("hidden", "network sizes must be ≥ 1"));
@@ -154,7 +157,9 @@ impl AgentConfig {
         }
         self.worker.validate("worker")?;
         self.manager.validate("manager")?;
-        if self.traversal && !(self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All) {
+        if self.traversal
+            && !(self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All)
+        {
             return Err(ConfigError::new(
                 "traversal",
                 "needs the Wide-then-Narrow agent over V_rand or V_p (the graph of V_all is trivial)",
@@ -232,7 +237,11 @@ impl std::fmt::Debug for WorldGraphInputs {
 impl WorldGraphInputs {
     /// A graph over 24 random cells of `layout` and no `π_g` (for the
     /// learner benchmark, which needs no discovery run).
-    pub fn random_for_bench(layout: &Layout, task: Task, seed: u64) -> Result<WorldGraphInputs, LearnerError> {
+    pub fn random_for_bench(
+        layout: &Layout,
+        task: Task,
+        seed: u64,
+    ) -> Result<WorldGraphInputs, LearnerError> {
         let cfg = planner::PlannerConfig {
             candidates: planner::CandidateSet::Random { k: 24 },
             seed,
@@ -374,9 +383,16 @@ impl HrlAgent {
         cfg.validate()?;
         let (width, height) = (layout.width, layout.height);
         let num_actions = task.num_actions();
-        let inputs = inputs.unwrap_or(WorldGraphInputs { graph: None, gcp: None });
+        let inputs = inputs.unwrap_or(WorldGraphInputs {
+            graph: None,
+            gcp: None,
+        });
         if cfg.needs_graph() && inputs.graph.is_none() {
-            return Err(ConfigError::new("candidates", "WN over V_rand or V_p needs a world graph").into());
+            return Err(ConfigError::new(
+                "candidates",
+                "WN over V_rand or V_p needs a world graph",
+            )
+            .into());
         }
         if cfg.init_from_gcp && inputs.gcp.is_none() {
             return Err(ConfigError::new("init_from_gcp", "needs π_g from a discovery run").into());
@@ -389,7 +405,10 @@ impl HrlAgent {
             goal_channel: hierarchical,
         };
         let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
-            (AgentKind::WideNarrow, Candidates::All) => planner::pivotal::v_all(layout).iter().map(|c| c.0).collect(),
+            (AgentKind::WideNarrow, Candidates::All) => planner::pivotal::v_all(layout)
+                .iter()
+                .map(|c| c.0)
+                .collect(),
             (AgentKind::WideNarrow, _) => inputs
                 .graph
                 .as_ref()
@@ -397,7 +416,8 @@ impl HrlAgent {
                 .unwrap_or_default(),
             _ => Vec::new(),
         };
-        let window = (cfg.kind == AgentKind::WideNarrow).then(|| Window::new(cfg.window_side(width), layout));
+        let window = (cfg.kind == AgentKind::WideNarrow)
+            .then(|| Window::new(cfg.window_side(width), layout));
         let valid_cells: Vec<bool> = {
             let mut v = vec![false; width * height];
             for c in planner::pivotal::v_all(layout) {
@@ -447,11 +467,19 @@ impl HrlAgent {
                 )
                 .into());
             }
-            let mut report = init::copy_from(gcp.var_store(), &worker_vs, &["encoder", "core", "policy", "value"]);
+            let mut report = init::copy_from(
+                gcp.var_store(),
+                &worker_vs,
+                &["encoder", "core", "policy", "value"],
+            );
             if let Some(vs) = &manager_vs {
                 let m = init::copy_from(gcp.var_store(), vs, &["encoder"]);
-                report.copied.extend(m.copied.into_iter().map(|n| format!("manager/{n}")));
-                report.partial.extend(m.partial.into_iter().map(|n| format!("manager/{n}")));
+                report
+                    .copied
+                    .extend(m.copied.into_iter().map(|n| format!("manager/{n}")));
+                report
+                    .partial
+                    .extend(m.partial.into_iter().map(|n| format!("manager/{n}")));
             }
             init_report = Some(report);
         }
@@ -465,7 +493,11 @@ impl HrlAgent {
             Execution::Replay
         };
         if cfg.traversal && execution == Execution::Steer && inputs.gcp.is_none() {
-            return Err(ConfigError::new("traversal", "MultiGoal-Stochastic traversal is steered by π_g: give a discovery run").into());
+            return Err(ConfigError::new(
+                "traversal",
+                "MultiGoal-Stochastic traversal is steered by π_g: give a discovery run",
+            )
+            .into());
         }
         let mut agent = HrlAgent {
             cfg: cfg.clone(),
@@ -527,7 +559,13 @@ impl HrlAgent {
     /// Chooses the gradient path of the Worker's (or baseline's) update
     /// (the benchmark's plain path is [`GradPath::PerStep`]).
     pub fn set_grad_path(&mut self, path: GradPath) {
-        self.rollout = Rollout::new(path, self.cfg.envs, self.width, self.height, self.hierarchical());
+        self.rollout = Rollout::new(
+            path,
+            self.cfg.envs,
+            self.width,
+            self.height,
+            self.hierarchical(),
+        );
     }
 
     fn hierarchical(&self) -> bool {
@@ -546,7 +584,11 @@ impl HrlAgent {
             manager_state: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
             steer_state: self.gcp.as_ref().map(|g| g.network().zero_state(n as i64)),
             envs: vec![fresh; n],
-            queues: (0..n).map(|_| DecisionQueue { decisions: Vec::new() }).collect(),
+            queues: (0..n)
+                .map(|_| DecisionQueue {
+                    decisions: Vec::new(),
+                })
+                .collect(),
             manager_init: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
             rng: SmallRng::seed_from_u64(seed),
         }
@@ -555,10 +597,21 @@ impl HrlAgent {
     /// Starts training segment `segment`: every environment starts a new
     /// episode, and the core states, goals and the action RNG start afresh
     /// from `(seed, segment)`.
-    pub fn start_segment(&mut self, env: &mut dyn BatchEnvironment, segment: u64) -> Result<(), LearnerError> {
+    pub fn start_segment(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+        segment: u64,
+    ) -> Result<(), LearnerError> {
         let n = env.num_envs();
         if n != self.cfg.envs {
-            return Err(ConfigError::new("envs", format!("the agent was built for {} environments, the batch has {n}", self.cfg.envs)).into());
+            return Err(ConfigError::new(
+                "envs",
+                format!(
+                    "the agent was built for {} environments, the batch has {n}",
+                    self.cfg.envs
+                ),
+            )
+            .into());
         }
         env.step(&vec![action::RESET; n])?;
         self.ctl = self.controller(n, sim::env_seed(self.seed ^ SEGMENT_SALT, segment));
@@ -576,7 +629,8 @@ impl HrlAgent {
     /// plus the Manager's forward and backward once per decision (about one
     /// per `c / 2` steps).
     pub fn flops_per_env_step(&self, path: GradPath) -> f64 {
-        let worker = crate::a2c::net::flops_per_env_step(self.worker.trunk(), self.num_actions as i64, path);
+        let worker =
+            crate::a2c::net::flops_per_env_step(self.worker.trunk(), self.num_actions as i64, path);
         match &self.manager {
             Some(m) => {
                 let (c1, rest) = crate::a2c::net::trunk_macs(m.trunk(), Some(10.0));
@@ -590,22 +644,38 @@ impl HrlAgent {
     /// Goal marks of the Worker's input: one slot (FN) or two (WN).
     fn goal_marks(&self, ctl: &Controller) -> Vec<u32> {
         match self.cfg.kind {
-            AgentKind::WideNarrow => ctl.envs.iter().flat_map(|e| [e.goal.wide, e.goal.narrow]).collect(),
+            AgentKind::WideNarrow => ctl
+                .envs
+                .iter()
+                .flat_map(|e| [e.goal.wide, e.goal.narrow])
+                .collect(),
             _ => ctl.envs.iter().map(|e| e.goal.narrow).collect(),
         }
     }
 
     fn slots(&self) -> usize {
-        if self.cfg.kind == AgentKind::WideNarrow { 2 } else { 1 }
+        if self.cfg.kind == AgentKind::WideNarrow {
+            2
+        } else {
+            1
+        }
     }
 
     /// The Manager decides for every environment that needs a new goal;
     /// with `record`, the decisions join the training queues.
-    fn decide(&mut self, ctl: &mut Controller, obs: &ObsView<'_>, record: bool, trace: &mut Option<(usize, u32, &mut EpisodeTrace)>) {
+    fn decide(
+        &mut self,
+        ctl: &mut Controller,
+        obs: &ObsView<'_>,
+        record: bool,
+        trace: &mut Option<(usize, u32, &mut EpisodeTrace)>,
+    ) {
         let Some(manager) = &self.manager else {
             return;
         };
-        let who: Vec<usize> = (0..ctl.envs.len()).filter(|&e| ctl.envs[e].need_decision).collect();
+        let who: Vec<usize> = (0..ctl.envs.len())
+            .filter(|&e| ctl.envs[e].need_decision)
+            .collect();
         if who.is_empty() {
             return;
         }
@@ -622,14 +692,25 @@ impl HrlAgent {
             .select(&idx)
             .reset_done(&mask(&resets));
         let (next, values, h) = manager.act(&input, &state);
-        ctl.manager_state.as_mut().expect("state").scatter(&idx, &next);
+        ctl.manager_state
+            .as_mut()
+            .expect("state")
+            .scatter(&idx, &next);
         // Draw the goals.
-        let mut picks: Vec<(i64, i64, u32, u32, Vec<f32>, Vec<bool>)> = Vec::with_capacity(who.len());
+        let mut picks: Vec<(i64, i64, u32, u32, Vec<f32>, Vec<bool>)> =
+            Vec::with_capacity(who.len());
         match manager.head() {
             ManagerHead::Feudal { .. } => {
                 let pi = manager.feudal_policy(&h).expect("feudal");
                 for cell in crate::seeding::sample_index(&mut ctl.rng, &pi.probs()) {
-                    picks.push((cell as i64, 0, cell as u32, cell as u32, Vec::new(), Vec::new()));
+                    picks.push((
+                        cell as i64,
+                        0,
+                        cell as u32,
+                        cell as u32,
+                        Vec::new(),
+                        Vec::new(),
+                    ));
                 }
             }
             ManagerHead::WideNarrow(head) => {
@@ -644,11 +725,25 @@ impl HrlAgent {
                 }
                 let local = Tensor::from_slice(&locals.concat()).view([who.len() as i64, -1]);
                 let valid = Tensor::from_slice(&valids.concat()).view([who.len() as i64, -1]);
-                let narrow = tch::no_grad(|| crate::seeding::sample_index(&mut ctl.rng, &head.narrow(&h, &local, &valid).probs()));
+                let narrow = tch::no_grad(|| {
+                    crate::seeding::sample_index(
+                        &mut ctl.rng,
+                        &head.narrow(&h, &local, &valid).probs(),
+                    )
+                });
                 for j in 0..who.len() {
                     let gw = self.candidates[wide[j]];
-                    let gn = window.cell(gw, narrow[j]).expect("a valid slot is inside the grid");
-                    picks.push((wide[j] as i64, narrow[j] as i64, gw, gn, std::mem::take(&mut locals[j]), std::mem::take(&mut valids[j])));
+                    let gn = window
+                        .cell(gw, narrow[j])
+                        .expect("a valid slot is inside the grid");
+                    picks.push((
+                        wide[j] as i64,
+                        narrow[j] as i64,
+                        gw,
+                        gn,
+                        std::mem::take(&mut locals[j]),
+                        std::mem::take(&mut valids[j]),
+                    ));
                 }
             }
         }
@@ -705,12 +800,21 @@ impl HrlAgent {
 
     /// Actions for the environments under traversal: the recorded action
     /// (replay) or `π_g`'s greedy step towards the next node (steer).
-    fn traversal_actions(&mut self, ctl: &mut Controller, obs: &ObsView<'_>, actions: &mut [u8]) -> Result<(), LearnerError> {
+    fn traversal_actions(
+        &mut self,
+        ctl: &mut Controller,
+        obs: &ObsView<'_>,
+        actions: &mut [u8],
+    ) -> Result<(), LearnerError> {
         let mut steer = false;
         for (e, c) in ctl.envs.iter().enumerate() {
             if let Some(t) = &c.traversal {
                 match t.execution() {
-                    Execution::Replay => actions[e] = t.next_action().expect("a traversal under way has an action"),
+                    Execution::Replay => {
+                        actions[e] = t
+                            .next_action()
+                            .expect("a traversal under way has an action")
+                    }
                     Execution::Steer => steer = true,
                 }
             }
@@ -720,16 +824,35 @@ impl HrlAgent {
             let goals: Vec<u32> = ctl
                 .envs
                 .iter()
-                .map(|c| c.traversal.as_ref().and_then(Traversal::waypoint).unwrap_or(NO_GOAL))
+                .map(|c| {
+                    c.traversal
+                        .as_ref()
+                        .and_then(Traversal::waypoint)
+                        .unwrap_or(NO_GOAL)
+                })
                 .collect();
-            let fresh: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.as_ref().is_some_and(Traversal::leg_starts)).collect();
-            let state = ctl.steer_state.as_ref().expect("steer state").reset_done(&mask(&fresh));
-            let (chosen, next) = gcp
-                .greedy_step(obs, &goals, &state)
-                .map_err(|e| LearnerError::Checkpoint { path: "π_g".into(), message: e.to_string() })?;
+            let fresh: Vec<bool> = ctl
+                .envs
+                .iter()
+                .map(|c| c.traversal.as_ref().is_some_and(Traversal::leg_starts))
+                .collect();
+            let state = ctl
+                .steer_state
+                .as_ref()
+                .expect("steer state")
+                .reset_done(&mask(&fresh));
+            let (chosen, next) =
+                gcp.greedy_step(obs, &goals, &state)
+                    .map_err(|e| LearnerError::Checkpoint {
+                        path: "π_g".into(),
+                        message: e.to_string(),
+                    })?;
             ctl.steer_state = Some(next);
             for (e, c) in ctl.envs.iter().enumerate() {
-                if c.traversal.as_ref().is_some_and(|t| t.execution() == Execution::Steer) {
+                if c.traversal
+                    .as_ref()
+                    .is_some_and(|t| t.execution() == Execution::Steer)
+                {
                     // π_g was trained on the navigation actions.
                     actions[e] = chosen[e].min(action::FORWARD);
                 }
@@ -763,9 +886,13 @@ impl HrlAgent {
                 }
             }
             let goals = self.goal_marks(ctl);
-            let marks = self.hierarchical().then(|| GoalMarks { cells: &goals, per_env: self.slots() });
+            let marks = self.hierarchical().then(|| GoalMarks {
+                cells: &goals,
+                per_env: self.slots(),
+            });
             let out = if train {
-                self.rollout.act(&self.worker, &obs, marks, &ctl.worker_state)
+                self.rollout
+                    .act(&self.worker, &obs, marks, &ctl.worker_state)
             } else {
                 let mut input = CellInput::new(self.width, self.height, marks.is_some());
                 input.push_obs(&obs, marks);
@@ -877,10 +1004,20 @@ impl HrlAgent {
 
     /// One training iteration: a rollout of `T` steps, then the Worker's
     /// (baseline's) and the Manager's updates.
-    pub fn train_iteration(&mut self, env: &mut dyn BatchEnvironment) -> Result<IterationStats, LearnerError> {
+    pub fn train_iteration(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+    ) -> Result<IterationStats, LearnerError> {
         let n = env.num_envs();
         if n != self.cfg.envs {
-            return Err(ConfigError::new("envs", format!("the agent was built for {} environments, the batch has {n}", self.cfg.envs)).into());
+            return Err(ConfigError::new(
+                "envs",
+                format!(
+                    "the agent was built for {} environments, the batch has {n}",
+                    self.cfg.envs
+                ),
+            )
+            .into());
         }
         let empty = self.controller(0, 0);
         let mut ctl = std::mem::replace(&mut self.ctl, empty);
@@ -893,18 +1030,27 @@ impl HrlAgent {
             let obs = env.observe();
             self.decide(&mut ctl, &obs, true, &mut None);
             let goals = self.goal_marks(&ctl);
-            let marks = self.hierarchical().then(|| GoalMarks { cells: &goals, per_env: self.slots() });
+            let marks = self.hierarchical().then(|| GoalMarks {
+                cells: &goals,
+                per_env: self.slots(),
+            });
             self.rollout.bootstrap = bootstrap_values(&self.worker, &obs, marks, &ctl.worker_state);
         }
         let t0 = std::time::Instant::now();
         let (loss, worker) = self.rollout.loss(&self.worker, &self.cfg.worker);
         let t1 = PhaseTimes::lap(&mut self.times.loss, t0);
-        self.worker_opt.backward_step(&loss, self.cfg.worker.grad_clip_norm);
+        self.worker_opt
+            .backward_step(&loss, self.cfg.worker.grad_clip_norm);
         let mut t2 = PhaseTimes::lap(&mut self.times.backward, t1);
         let mut manager_figures = LossFigures::default();
         if let (Some(m), Some(opt)) = (&self.manager, self.manager_opt.as_mut()) {
             let init = ctl.manager_init.take().expect("Manager init state");
-            let (loss, figures, next) = m.loss(&ctl.queues, &init, &self.cfg.manager, self.cfg.manager.gamma);
+            let (loss, figures, next) = m.loss(
+                &ctl.queues,
+                &init,
+                &self.cfg.manager,
+                self.cfg.manager.gamma,
+            );
             t2 = PhaseTimes::lap(&mut self.times.loss, t2);
             if figures.entries > 0.0 {
                 opt.backward_step(&loss, self.cfg.manager.grad_clip_norm);
@@ -926,11 +1072,19 @@ impl HrlAgent {
         Ok(IterationStats {
             env_steps: counts.steps,
             episodes: counts.episodes,
-            mean_return: if counts.episodes > 0 { counts.returns / counts.episodes as f64 } else { 0.0 },
+            mean_return: if counts.episodes > 0 {
+                counts.returns / counts.episodes as f64
+            } else {
+                0.0
+            },
             worker,
             manager: manager_figures,
             intervals: counts.intervals,
-            goals_reached: if counts.intervals > 0 { counts.reached as f64 / counts.intervals as f64 } else { 0.0 },
+            goals_reached: if counts.intervals > 0 {
+                counts.reached as f64 / counts.intervals as f64
+            } else {
+                0.0
+            },
             traversal_share: counts.traversal_steps as f64 / counts.steps.max(1) as f64,
         })
     }
@@ -955,7 +1109,8 @@ impl HrlAgent {
         let mut trace = trace.map(|t| {
             *t = EpisodeTrace::default();
             let m = &env.observe().meta[0];
-            t.cells.push((m.y as usize * self.width + m.x as usize) as u32);
+            t.cells
+                .push((m.y as usize * self.width + m.x as usize) as u32);
             (0usize, 0u32, t)
         });
         while done.iter().any(|d| !d) {
@@ -985,7 +1140,11 @@ impl HrlAgent {
         let mean_return = returns.iter().map(|&r| f64::from(r)).sum::<f64>() / n.max(1) as f64;
         let success_rate = success.iter().filter(|&&s| s).count() as f64 / n.max(1) as f64;
         Ok(EvalResult {
-            score: if self.task == Task::DoorKey { success_rate } else { mean_return },
+            score: if self.task == Task::DoorKey {
+                success_rate
+            } else {
+                mean_return
+            },
             mean_return,
             success_rate,
             returns,
@@ -999,7 +1158,11 @@ impl HrlAgent {
     fn named_tensors(&self) -> Vec<(String, Tensor)> {
         let mut out: Vec<(String, Tensor)> = Vec::new();
         let mut add = |prefix: &str, vs: &nn::VarStore| {
-            let mut v: Vec<(String, Tensor)> = vs.variables().into_iter().map(|(k, t)| (format!("{prefix}/{k}"), t)).collect();
+            let mut v: Vec<(String, Tensor)> = vs
+                .variables()
+                .into_iter()
+                .map(|(k, t)| (format!("{prefix}/{k}"), t))
+                .collect();
             v.sort_by(|a, b| a.0.cmp(&b.0));
             out.extend(v);
         };
@@ -1007,9 +1170,18 @@ impl HrlAgent {
         if let Some(vs) = &self.manager_vs {
             add("manager", vs);
         }
-        out.extend(self.worker_opt.state().into_iter().map(|(k, t)| (format!("worker-{k}"), t)));
+        out.extend(
+            self.worker_opt
+                .state()
+                .into_iter()
+                .map(|(k, t)| (format!("worker-{k}"), t)),
+        );
         if let Some(o) = &self.manager_opt {
-            out.extend(o.state().into_iter().map(|(k, t)| (format!("manager-{k}"), t)));
+            out.extend(
+                o.state()
+                    .into_iter()
+                    .map(|(k, t)| (format!("manager-{k}"), t)),
+            );
         }
         out
     }
@@ -1031,15 +1203,22 @@ impl HrlAgent {
             path: source.display().to_string(),
             message,
         };
-        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(bytes)).map_err(|e| bad(e.to_string()))?;
+        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(bytes))
+            .map_err(|e| bad(e.to_string()))?;
         let find = |k: &str| loaded.iter().find(|(n, _)| n == k).map(|(_, t)| t);
         tch::no_grad(|| -> Result<(), LearnerError> {
-            for (prefix, vs) in std::iter::once(("worker", &self.worker_vs)).chain(self.manager_vs.as_ref().map(|v| ("manager", v))) {
+            for (prefix, vs) in std::iter::once(("worker", &self.worker_vs))
+                .chain(self.manager_vs.as_ref().map(|v| ("manager", v)))
+            {
                 for (k, mut t) in vs.variables() {
                     let key = format!("{prefix}/{k}");
                     let src = find(&key).ok_or_else(|| bad(format!("no tensor {key}")))?;
                     if src.size() != t.size() {
-                        return Err(bad(format!("{key} has shape {:?}, expected {:?}", src.size(), t.size())));
+                        return Err(bad(format!(
+                            "{key} has shape {:?}, expected {:?}",
+                            src.size(),
+                            t.size()
+                        )));
                     }
                     t.copy_(src);
                 }
@@ -1049,7 +1228,10 @@ impl HrlAgent {
         let strip = |prefix: &str| -> Vec<(String, Tensor)> {
             loaded
                 .iter()
-                .filter_map(|(k, t)| k.strip_prefix(prefix).map(|s| (s.to_string(), t.shallow_clone())))
+                .filter_map(|(k, t)| {
+                    k.strip_prefix(prefix)
+                        .map(|s| (s.to_string(), t.shallow_clone()))
+                })
                 .collect()
         };
         self.worker_opt.load_state(&strip("worker-")).map_err(bad)?;

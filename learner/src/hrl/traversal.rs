@@ -196,7 +196,11 @@ impl Traversal {
                 if cell != expected {
                     Progress::Stopped
                 } else if self.next == self.actions.len() {
-                    if cell == self.target { Progress::Arrived } else { Progress::Stopped }
+                    if cell == self.target {
+                        Progress::Arrived
+                    } else {
+                        Progress::Stopped
+                    }
                 } else {
                     Progress::Continue
                 }
@@ -278,7 +282,14 @@ mod tests {
                     let mut env = env_at(&layout, Task::MultiGoal, from, (from % 4) as u8);
                     let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
                     env.observe(&mut cells, &mut meta[0]);
-                    let t = Traversal::plan(&g, &view(&layout, &cells, &meta), 0, to, Execution::Replay, &mut route);
+                    let t = Traversal::plan(
+                        &g,
+                        &view(&layout, &cells, &meta),
+                        0,
+                        to,
+                        Execution::Replay,
+                        &mut route,
+                    );
                     let Some(mut t) = t else {
                         assert!(from == to, "{}: no route {from} → {to}", layout.name);
                         continue;
@@ -290,7 +301,9 @@ mod tests {
                         match t.advance(env.cell() as u32, meta[0].done()) {
                             Progress::Continue => {}
                             Progress::Arrived => break,
-                            Progress::Stopped => panic!("{}: route {from} → {to} went astray", layout.name),
+                            Progress::Stopped => {
+                                panic!("{}: route {from} → {to} went astray", layout.name)
+                            }
                         }
                     }
                     assert_eq!(env.cell() as u32, to);
@@ -320,7 +333,14 @@ mod tests {
         let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
         env.observe(&mut cells, &mut meta[0]);
         let plan = |cells: &[u8], route: &mut Route| {
-            Traversal::plan(&g, &view(&layout, cells, &meta), 0, right, Execution::Replay, route)
+            Traversal::plan(
+                &g,
+                &view(&layout, cells, &meta),
+                0,
+                right,
+                Execution::Replay,
+                route,
+            )
         };
         for shut in [Object::DoorClosed, Object::DoorLocked] {
             let mut grid = cells.clone();
@@ -358,8 +378,15 @@ mod tests {
         let mut env = env_at(&layout, Task::MultiGoal, from, 0);
         let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
         env.observe(&mut cells, &mut meta[0]);
-        let mut t = Traversal::plan(&g, &view(&layout, &cells, &meta), 0, to, Execution::Steer, &mut route)
-            .expect("a route");
+        let mut t = Traversal::plan(
+            &g,
+            &view(&layout, &cells, &meta),
+            0,
+            to,
+            Execution::Steer,
+            &mut route,
+        )
+        .expect("a route");
         let limit = t.limits[0];
         // A steering policy that only turns never reaches the first node.
         let mut steps = 0;

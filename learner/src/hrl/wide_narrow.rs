@@ -128,7 +128,12 @@ impl WideNarrowHead {
         let local = (window_len * WINDOW_CHANNELS) as i64;
         WideNarrowHead {
             wide: nn::linear(p / "wide", hidden, candidates as i64, Default::default()),
-            narrow_hidden: nn::linear(p / "narrow_hidden", hidden + local, hidden, Default::default()),
+            narrow_hidden: nn::linear(
+                p / "narrow_hidden",
+                hidden + local,
+                hidden,
+                Default::default(),
+            ),
             narrow_out: nn::linear(p / "narrow", hidden, window_len as i64, Default::default()),
             window_len,
         }
@@ -142,7 +147,9 @@ impl WideNarrowHead {
     /// `π^n(·|s_t, g_w, s_w)` of core outputs `h` `[N, hidden]` and local
     /// inputs `[N, window·WINDOW_CHANNELS]`, masked by `valid` `[N, window]`.
     pub fn narrow(&self, h: &Tensor, local: &Tensor, valid: &Tensor) -> Categorical {
-        let x = Tensor::cat(&[h, local], 1).apply(&self.narrow_hidden).relu();
+        let x = Tensor::cat(&[h, local], 1)
+            .apply(&self.narrow_hidden)
+            .relu();
         Categorical::new(&self.narrow_out.forward(&x), Some(valid))
     }
 
@@ -206,15 +213,21 @@ mod tests {
 
     #[test]
     fn masked_narrow_slots_are_never_drawn() {
-        let layout = Layout::parse("corner", "#####\n#>..#\n#...#\n#..E#\n#####\n").expect("layout");
+        let layout =
+            Layout::parse("corner", "#####\n#>..#\n#...#\n#..E#\n#####\n").expect("layout");
         let win = Window::new(5, &layout);
         let centre = layout.cell_index(1, 1) as u32;
         let valid = win.valid(centre);
         let vs = nn::VarStore::new(Device::Cpu);
         let head = WideNarrowHead::new(&vs.root(), 8, 4, win.len());
         let h = Tensor::randn([64, 8], (Kind::Float, Device::Cpu)) * 10.0;
-        let local = Tensor::randn([64, (win.len() * WINDOW_CHANNELS) as i64], (Kind::Float, Device::Cpu));
-        let mask = Tensor::from_slice(&valid).view([1, -1]).expand([64, -1], false);
+        let local = Tensor::randn(
+            [64, (win.len() * WINDOW_CHANNELS) as i64],
+            (Kind::Float, Device::Cpu),
+        );
+        let mask = Tensor::from_slice(&valid)
+            .view([1, -1])
+            .expand([64, -1], false);
         let pn = head.narrow(&h, &local, &mask);
         let mut rng = rand::SeedableRng::seed_from_u64(1);
         for _ in 0..20 {
@@ -232,14 +245,24 @@ mod tests {
             // Wide logits [0, ln 2, ln 3] → π^ω = [1/6, 2/6, 3/6]; narrow
             // logits all 0 over 4 slots, slot 3 masked → uniform over 3.
             let mut w = head.wide.ws.shallow_clone();
-            let _ = w.copy_(&Tensor::from_slice(&[0f32, 0., 2f32.ln(), 0., 3f32.ln(), 0.]).view([3, 2]));
+            let _ = w
+                .copy_(&Tensor::from_slice(&[0f32, 0., 2f32.ln(), 0., 3f32.ln(), 0.]).view([3, 2]));
             let mut b = head.wide.bs.as_ref().expect("bias").shallow_clone();
             let _ = b.zero_();
             let _ = head.narrow_out.ws.shallow_clone().zero_();
-            let _ = head.narrow_out.bs.as_ref().expect("bias").shallow_clone().zero_();
+            let _ = head
+                .narrow_out
+                .bs
+                .as_ref()
+                .expect("bias")
+                .shallow_clone()
+                .zero_();
         });
         let h = Tensor::from_slice(&[1f32, 0.]).view([1, 2]);
-        let local = Tensor::zeros([1, (4 * WINDOW_CHANNELS) as i64], (Kind::Float, Device::Cpu));
+        let local = Tensor::zeros(
+            [1, (4 * WINDOW_CHANNELS) as i64],
+            (Kind::Float, Device::Cpu),
+        );
         let valid = Tensor::from_slice(&[true, true, true, false]).view([1, 4]);
         let (logp, ent) = head.terms(
             &h,

@@ -52,7 +52,14 @@ impl WorkerGoal {
     /// the environment's episode ended with it, so its arrival cannot be
     /// judged), with horizon `horizon`, goal reward `goal` and step penalty
     /// `penalty`.
-    pub fn book(&mut self, cell: u32, episode_ended: bool, horizon: u32, goal: f32, penalty: f32) -> WorkerStep {
+    pub fn book(
+        &mut self,
+        cell: u32,
+        episode_ended: bool,
+        horizon: u32,
+        goal: f32,
+        penalty: f32,
+    ) -> WorkerStep {
         self.steps += 1;
         if episode_ended {
             return WorkerStep {

@@ -1,0 +1,299 @@
+//! `worldgraph train` and `evaluate` as a user runs them: the protocol's
+//! files, the same result for the same seed, after a kill and resume too,
+//! traversal and `π_g` initialisation from a discovery run's files, and
+//! clear refusals.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use learner::gcp::{GcpConfig, GoalConditionedPolicy};
+use planner::{CandidateSet, PlannerConfig, WorldGraph};
+use sim::{Maze, Task};
+
+fn worldgraph(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(args)
+        .env("WORLDGRAPH_TORCH_THREADS", "1")
+        .output()
+        .expect("run worldgraph")
+}
+
+fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "status {:?}\nstderr: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A CI-sized budget: 8 environments, rollouts of 20, four segments of
+/// five iterations, 3 validation and 5 test seeds.
+const TINY: &str = "env_steps = 3200\neval_every = 800\nvalidation_seeds = 3\ntest_seeds = 5\n[agent]\nenvs = 8\nrollout_len = 21\n";
+
+fn tiny_config(dir: &Path) -> String {
+    let p = dir.join("tiny.toml");
+    std::fs::write(&p, TINY).unwrap();
+    p.display().to_string()
+}
+
+/// The files a `discover` run leaves for stage 2, made directly: a world
+/// graph over 12 random cells of the small maze and an untrained `π_g`.
+fn discovery_files(dir: &Path) -> PathBuf {
+    let run = dir.join("discovery");
+    std::fs::create_dir_all(&run).unwrap();
+    let layout = Maze::Small.layout(false);
+    let cfg = PlannerConfig {
+        candidates: CandidateSet::Random { k: 12 },
+        seed: 5,
+        walks_per_node: 128,
+        walk_len: 128,
+        task: Task::MultiGoal,
+        ..PlannerConfig::default()
+    };
+    WorldGraph::build(&layout, &cfg, &[])
+        .unwrap()
+        .save(&run.join("graph.json"))
+        .unwrap();
+    let gcp_cfg = GcpConfig::default();
+    let gcp = GoalConditionedPolicy::new(&gcp_cfg, &layout, 1, 3, 9).unwrap();
+    gcp.save(run.join("pi_g.ot")).unwrap();
+    std::fs::write(run.join("pi_g.json"), serde_json::to_vec(&gcp_cfg).unwrap()).unwrap();
+    run
+}
+
+fn read(p: &Path) -> String {
+    std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn test_json(run: &Path) -> serde_json::Value {
+    serde_json::from_str(&read(&run.join("test.json"))).unwrap()
+}
+
+#[test]
+fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path());
+    let run = |name: &str, seed: &str| {
+        let r = dir.path().join(name);
+        ok(&worldgraph(&[
+            "train",
+            "--task",
+            "multigoal",
+            "--maze",
+            "small",
+            "--agent",
+            "a2c",
+            "--seed",
+            seed,
+            "--config",
+            &cfg,
+            "--run",
+            r.to_str().unwrap(),
+        ]));
+        r
+    };
+    let a = run("a", "3");
+    let b = run("b", "3");
+    let c = run("c", "4");
+    for f in [
+        "config.toml",
+        "metrics.csv",
+        "curves.png",
+        "test.json",
+        "episode.png",
+        "seeds.json",
+    ] {
+        assert!(a.join(f).exists(), "{f} missing");
+    }
+    let metrics = read(&a.join("metrics.csv"));
+    assert_eq!(
+        metrics.lines().count(),
+        1 + 4,
+        "a header and one row per segment:\n{metrics}"
+    );
+    assert_eq!(
+        metrics,
+        read(&b.join("metrics.csv")),
+        "same seed, same metrics"
+    );
+    assert_ne!(
+        metrics,
+        read(&c.join("metrics.csv")),
+        "another seed, other metrics"
+    );
+    let t = test_json(&a);
+    assert_eq!(t["test_seeds"], 5);
+    assert_eq!(t["validation_seeds"], 3);
+    assert_eq!(t["env_steps"], 4 * 5 * 8 * 21);
+    assert_eq!(t["test_score"], test_json(&b)["test_score"]);
+    let curve = t["validation_curve"].as_array().unwrap();
+    assert_eq!(curve.len(), 4);
+    // The best checkpoint is the one with the best validation score.
+    let best = curve
+        .iter()
+        .map(|p| p[1].as_f64().unwrap())
+        .fold(f64::MIN, f64::max);
+    assert_eq!(t["best_validation"].as_f64().unwrap(), best);
+    // Its score on the test seeds, re-scored by `evaluate`.
+    let out = ok(&worldgraph(&[
+        "evaluate",
+        a.to_str().unwrap(),
+        "--seeds",
+        "0..5",
+        "--json",
+    ]));
+    let e: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(
+        e["score"], t["test_score"],
+        "evaluate reproduces the test score"
+    );
+}
+
+#[test]
+fn a_killed_run_resumes_and_ends_as_an_uninterrupted_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path());
+    let graph = discovery_files(dir.path());
+    let args = |run: &Path| -> Vec<String> {
+        [
+            "train",
+            "--task",
+            "multigoal",
+            "--maze",
+            "small",
+            "--agent",
+            "wn",
+            "--candidates",
+            "pivotal",
+            "--traversal",
+            "--init",
+            "pi-g",
+            "--seed",
+            "1",
+            "--config",
+            &cfg,
+            "--world-graph",
+            graph.to_str().unwrap(),
+            "--run",
+            run.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let whole = dir.path().join("whole");
+    let a: Vec<String> = args(&whole);
+    ok(&worldgraph(
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+    ));
+
+    let killed = dir.path().join("killed");
+    let a: Vec<String> = args(&killed);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(&a)
+        .env("WORLDGRAPH_TORCH_THREADS", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let state = killed.join("checkpoint").join("state.json");
+    let start = Instant::now();
+    while !state.exists() && start.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(state.exists(), "no checkpoint within 2 minutes");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let out = worldgraph(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    ok(&out);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("resuming"),
+        "the restart resumed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        read(&whole.join("metrics.csv")),
+        read(&killed.join("metrics.csv"))
+    );
+    assert_eq!(
+        test_json(&whole)["test_score"],
+        test_json(&killed)["test_score"]
+    );
+    // Traversal happened, and the world graph came from the discovery run.
+    let metrics = read(&whole.join("metrics.csv"));
+    let traversal: f64 = metrics
+        .lines()
+        .skip(1)
+        .map(|l| l.rsplit(',').next().unwrap().parse::<f64>().unwrap())
+        .sum();
+    assert!(traversal > 0.0, "no step was a traversal:\n{metrics}");
+}
+
+#[test]
+fn train_refuses_what_it_cannot_run_with_a_clear_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = |args: &[&str], says: &str| {
+        let out = worldgraph(args);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+    };
+    let run = dir.path().join("r");
+    let run = run.to_str().unwrap();
+    bad(
+        &[
+            "train",
+            "--agent",
+            "wn",
+            "--candidates",
+            "pivotal",
+            "--run",
+            run,
+        ],
+        "needs --world-graph",
+    );
+    bad(
+        &["train", "--agent", "fn", "--traversal", "--run", run],
+        "traversal",
+    );
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(&cfg, "env_steps = 10\n[agent]\nenvz = 3\n").unwrap();
+    bad(
+        &["train", "--config", cfg.to_str().unwrap(), "--run", run],
+        "unknown field",
+    );
+    bad(
+        &["train", "--seed", "5000000", "--run", run],
+        "--seed must be below",
+    );
+    // A run directory of another configuration is not resumed.
+    let tiny = tiny_config(dir.path());
+    ok(&worldgraph(&[
+        "train",
+        "--agent",
+        "a2c",
+        "--config",
+        &tiny,
+        "--run",
+        run,
+        "--env-steps",
+        "800",
+    ]));
+    bad(
+        &[
+            "train",
+            "--agent",
+            "fn",
+            "--config",
+            &tiny,
+            "--run",
+            run,
+            "--env-steps",
+            "800",
+        ],
+        "agent.kind",
+    );
+}
