@@ -27,8 +27,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// The main job on the embedded default: render the medium maze, run a
-    /// short batched simulation and report its throughput.
+    /// The main job on the embedded default: the whole method on the small
+    /// maze, briefly (discover the world graph, train Wide-then-Narrow with
+    /// the graph and the A2C baseline, print both test scores).
     Demo(commands::demo::DemoArgs),
     /// The three processes side by side (sim, learner, planner) over shared
     /// memory, stopped together on Ctrl-C.

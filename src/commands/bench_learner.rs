@@ -208,6 +208,16 @@ fn build(
     Ok((learner, env))
 }
 
+/// The path measured as "fast": the default, or `WORLDGRAPH_GRAD_PATH`
+/// (`recompute`, `per-step`).
+fn fast_path() -> GradPath {
+    match std::env::var("WORLDGRAPH_GRAD_PATH").as_deref() {
+        Ok("recompute") => GradPath::Recompute,
+        Ok("per-step") => GradPath::PerStep,
+        _ => GradPath::default(),
+    }
+}
+
 /// Dense `n × n` matrix products on the current threads: GFLOP/s.
 fn matmul_gflops(seconds: f64) -> f64 {
     let n = 384;
@@ -250,8 +260,8 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         .rollout
         .unwrap_or(if a.agent == BenchAgent::Gcp { 16 } else { 60 });
     anyhow::ensure!(rollout > 0, "--rollout must be at least 1");
-    let (mut fast, mut fast_env) = build(&a, GradPath::Recompute, rollout)?;
-    let (mut plain, mut plain_env) = build(&a, GradPath::PerStep, rollout)?;
+    let (mut fast, mut fast_env) = build(&a, fast_path(), rollout)?;
+    let (mut plain, mut plain_env) = build(&a, GradPath::Plain, rollout)?;
     let steps_per_iter = (a.envs * rollout) as u64;
     // Warm-up: one iteration each (allocator, libtorch's kernels).
     fast.iterate(&mut fast_env)?;
@@ -308,14 +318,14 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         &fast_times,
         fast_wall,
         fast_steps,
-        fast.flops(GradPath::Recompute),
+        fast.flops(fast_path()),
     );
     let plain_fig = figures(
         plain_rates,
         &plain_times,
         plain_wall,
         plain_steps,
-        plain.flops(GradPath::PerStep),
+        plain.flops(GradPath::Plain),
     );
     let (layout, env_cfg) = a.world.build()?;
     let report = LearnerBenchReport {

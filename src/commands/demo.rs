@@ -1,56 +1,98 @@
-//! `worldgraph demo`: the main job on the embedded default.
+//! `worldgraph demo`: the whole method on the small maze, briefly: stage 1
+//! discovers the world graph (pivotal states, edges, `π_g`), stage 2 trains
+//! Wide-then-Narrow over `V_p` with `π_g` initialisation and graph
+//! traversal, and the A2C baseline on the same budget; both are scored on
+//! the held-out test seeds. Throughput figures live under `bench`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
-use sim::{BatchEnv, Maze, Task, render};
+use sim::{Maze, Task};
 
-use super::bench::{BenchSimArgs, bench_sim, print_sim_report};
-use crate::world::WorldArgs;
+use super::discover::DiscoverArgs;
+use super::train::{AgentArg, CandidatesArg, InitArg, TestSummary, TrainArgs};
 
 /// `demo` options.
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// Directory for the pictures.
+    /// Directory of the demo's runs and pictures.
     #[arg(long, default_value = "runs/demo")]
     pub out: PathBuf,
-    /// Seconds of the throughput measurement.
-    #[arg(long, default_value_t = 3.0)]
-    pub seconds: f64,
-    /// Base seed.
+    /// Seed of both stages.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Rounds of world graph discovery.
+    #[arg(long, default_value_t = 10)]
+    pub rounds: u32,
+    /// Env-step budget of each stage 2 agent.
+    #[arg(long, default_value_t = 150_000)]
+    pub env_steps: u64,
 }
 
-/// Renders the medium maze (ASCII and PNG, plus a grid of 16 episodes'
-/// starts) and measures batched simulation throughput.
-pub fn run(a: DemoArgs) -> anyhow::Result<std::process::ExitCode> {
-    let world = WorldArgs {
-        maze: Maze::Medium,
-        layout: None,
+fn train(a: &DemoArgs, agent: AgentArg, graph: &Path, name: &str) -> anyhow::Result<TestSummary> {
+    let run = a.out.join(name);
+    let wn = agent == AgentArg::Wn;
+    super::train::run(TrainArgs {
         task: Task::MultiGoal,
+        maze: Maze::Small,
+        agent: Some(agent),
+        candidates: wn.then_some(CandidatesArg::Pivotal),
+        init: Some(if wn { InitArg::PiG } else { InitArg::None }),
+        traversal: wn,
+        world_graph: Some(graph.to_path_buf()),
         seed: a.seed,
-        max_steps: None,
-        balls: None,
-    };
-    let (layout, cfg) = world.build()?;
-    let (w, h) = (layout.width, layout.height);
-    let mut batch = BatchEnv::new(layout, cfg, 16, a.seed, 1)?;
-    let mut buf = batch.buffers();
-    batch.reset(buf.out());
-    print!("{}", render::ascii(&buf.cells[..w * h], w, &buf.meta[0]));
-    let one = a.out.join("medium-multigoal.png");
-    render::render_env(&buf.cells, w, h, &buf.meta[0], 24).save_png(&one)?;
-    let grid = a.out.join("medium-multigoal-batch.png");
-    render::render_batch(&buf.cells, &buf.meta, w, h, 16, 4, 12).save_png(&grid)?;
-    println!("wrote {} and {}", one.display(), grid.display());
-    let r = bench_sim(&BenchSimArgs {
-        world,
-        envs: 1024,
-        threads: 2,
-        seconds: a.seconds,
+        config: None,
+        env_steps: Some(a.env_steps),
+        run: Some(run.clone()),
         json: false,
     })?;
-    print_sim_report(&r);
+    Ok(serde_json::from_slice(&std::fs::read(
+        run.join("test.json"),
+    )?)?)
+}
+
+/// Runs the demo.
+pub fn run(a: DemoArgs) -> anyhow::Result<std::process::ExitCode> {
+    let discovery = a.out.join("discover-small");
+    eprintln!(
+        "demo 1/3: world graph discovery on the small maze ({} rounds)",
+        a.rounds
+    );
+    super::discover::run(DiscoverArgs {
+        maze: Maze::Small,
+        layout: None,
+        seed: a.seed,
+        run_dir: Some(discovery.clone()),
+        envs: 32,
+        rounds: Some(a.rounds),
+        patience: None,
+        gcp_iters: None,
+        config: None,
+        pipeline: false,
+        json: false,
+    })?;
+    eprintln!("demo 2/3: Wide-then-Narrow over V_p, π_g init, traversal");
+    let wn = train(&a, AgentArg::Wn, &discovery, "wn-pivotal-trav-init")?;
+    eprintln!("demo 3/3: the A2C baseline on the same budget");
+    let a2c = train(&a, AgentArg::A2c, &discovery, "a2c")?;
+    println!();
+    println!(
+        "small maze, MultiGoal, seed {}: test scores on 100 held-out seeds",
+        a.seed
+    );
+    println!(
+        "  {:<24} {:>10} {:>12} {:>10} {:>12}",
+        "agent", "test", "env steps", "wall s", "env-steps/s"
+    );
+    for s in [&wn, &a2c] {
+        println!(
+            "  {:<24} {:>10.3} {:>12} {:>10.1} {:>12.0}",
+            s.agent, s.test_score, s.env_steps, s.wall_seconds, s.train_steps_per_sec
+        );
+    }
+    println!(
+        "pictures: {}/{{discover-small/graph.png, wn-pivotal-trav-init/episode.png, */curves.png}}",
+        a.out.display()
+    );
     Ok(std::process::ExitCode::SUCCESS)
 }

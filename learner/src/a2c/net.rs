@@ -445,6 +445,11 @@ pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: super::rollout:
             2.0 * fwd + 2.0 * c1 + 4.0 * (rest + heads)
         }
         super::rollout::GradPath::PerStep => {
+            let (c1, rest) = trunk_macs(trunk, Some(10.0));
+            let fwd = 2.0 * (c1 + rest + heads);
+            fwd + 2.0 * c1 + 4.0 * (rest + heads)
+        }
+        super::rollout::GradPath::Plain => {
             let (c1, rest) = trunk_macs(trunk, None);
             let fwd = 2.0 * (c1 + rest + heads);
             fwd + 2.0 * c1 + 4.0 * (rest + heads)

@@ -3,7 +3,7 @@
 //!
 //! A rollout holds `T` steps of `B` environments, entry `t·B + b`, plus the
 //! core state it started from and the bootstrap values `V(s_T)` `[B]` (the
-//! `+1` of CleanRL's `[T + 1, B]` layout). Two ways to fill it, chosen by
+//! `+1` of CleanRL's `[T + 1, B]` layout). Three ways to fill it, chosen by
 //! [`GradPath`]:
 //!
 //! - [`GradPath::Recompute`] (the default): each step runs the network under
@@ -12,12 +12,16 @@
 //!   LSTM over the stored features from the stored initial state (resetting
 //!   where an episode ended), and applies the heads to all `T·B` core
 //!   outputs at once;
-//! - [`GradPath::PerStep`] (the plain path): each step runs the network
-//!   with autograd on dense one-hot planes and keeps its logits and value;
-//!   the update back-propagates through those graphs.
+//! - [`GradPath::PerStep`] (the default): each step runs the network with
+//!   autograd (first layer by gather-and-sum) and keeps its logits and
+//!   value; the update back-propagates through those graphs;
+//! - [`GradPath::Plain`]: the same with the dense first convolution over
+//!   one-hot planes (the benchmark's baseline).
 //!
-//! Both give the same loss and gradients for the same rollout (a test
-//! checks it); the first does far less work per step.
+//! All three give the same loss and gradients for the same rollout (a test
+//! checks it). Which is fastest is measured by `worldgraph bench learner`:
+//! with these small networks on a CPU the update is compute-bound, so the
+//! recomputation's second forward pass costs more than batching saves.
 
 use tch::{Kind, Tensor, nn};
 
@@ -30,10 +34,13 @@ use crate::batch_env::ObsView;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum GradPath {
     /// Act without gradient, recompute the rollout in one batch.
-    #[default]
     Recompute,
-    /// Keep the autograd graph of every step (dense first layer).
+    /// Keep the autograd graph of every step; gather-and-sum first layer.
+    #[default]
     PerStep,
+    /// The plain implementation: the autograd graph of every step, the
+    /// dense first convolution over one-hot planes.
+    Plain,
 }
 
 /// One rollout of an every-step agent.
@@ -142,10 +149,20 @@ impl Rollout {
                 PhaseTimes::lap(&mut self.times.act, t1);
                 out
             }
-            GradPath::PerStep => {
-                let x = encode_obs(obs, goals);
+            GradPath::PerStep | GradPath::Plain => {
+                let (x, input) = if self.path == GradPath::Plain {
+                    (Some(encode_obs(obs, goals)), None)
+                } else {
+                    let mut input = CellInput::new(obs.width, obs.height, goals.is_some());
+                    input.push_obs(obs, goals);
+                    (None, Some(input))
+                };
                 let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
-                let out = net.forward(&x, state);
+                let out = match (&x, &input) {
+                    (Some(x), _) => net.forward(x, state),
+                    (_, Some(input)) => net.step(input, state),
+                    _ => unreachable!("one of the two inputs is built"),
+                };
                 self.values.extend(floats(&out.value.detach()));
                 PhaseTimes::lap(&mut self.times.act, t1);
                 self.graph_logits.push(out.logits.shallow_clone());
@@ -197,7 +214,7 @@ impl Rollout {
                 let (logits, values) = net.heads(&hs.view([steps * b, -1]));
                 (logits, values)
             }
-            GradPath::PerStep => (
+            GradPath::PerStep | GradPath::Plain => (
                 Tensor::cat(&self.graph_logits, 0),
                 Tensor::cat(&self.graph_values, 0),
             ),
@@ -336,7 +353,19 @@ mod tests {
             (loss.double_value(&[]), figures, named)
         };
         let (loss_fast, fig_fast, g_fast) = grads(GradPath::Recompute);
-        let (loss_plain, fig_plain, g_plain) = grads(GradPath::PerStep);
+        let (loss_plain, fig_plain, g_plain) = grads(GradPath::Plain);
+        let (loss_step, _, g_step) = grads(GradPath::PerStep);
+        assert!(
+            (loss_step - loss_plain).abs() < 1e-5,
+            "{loss_step} vs {loss_plain}"
+        );
+        for ((name, a), (_, b)) in g_step.iter().zip(&g_plain) {
+            let scale = b.abs().max().double_value(&[]).max(1e-3);
+            assert!(
+                (a - b).abs().max().double_value(&[]) / scale < 1e-4,
+                "{name} (per-step, gather)"
+            );
+        }
         assert!(
             (loss_fast - loss_plain).abs() < 1e-5,
             "{loss_fast} vs {loss_plain}"

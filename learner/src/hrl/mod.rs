@@ -506,7 +506,7 @@ impl HrlAgent {
             height,
             num_actions,
             horizon: cfg.horizon(),
-            rollout: Rollout::new(GradPath::Recompute, cfg.envs, width, height, hierarchical),
+            rollout: Rollout::new(GradPath::default(), cfg.envs, width, height, hierarchical),
             worker_vs,
             worker,
             worker_opt,
@@ -876,7 +876,6 @@ impl HrlAgent {
         stats: &mut StepCounts,
     ) -> Result<(), LearnerError> {
         let n = env.num_envs();
-        let t0 = std::time::Instant::now();
         let (actions, out_state) = {
             let obs = env.observe();
             self.decide(ctl, &obs, train, &mut trace);
@@ -903,7 +902,6 @@ impl HrlAgent {
             self.traversal_actions(ctl, &obs, &mut actions)?;
             (actions, out.state)
         };
-        self.times.act += t0.elapsed().as_secs_f64();
         let traversing: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.is_some()).collect();
         let t1 = std::time::Instant::now();
         env.step(&actions)?;
@@ -922,15 +920,15 @@ impl HrlAgent {
                 stats.successes += usize::from(m.terminated() && m.reward > 0.0);
             }
             stats.steps += 1;
+            // (After an episode's end the observation is the next episode's
+            // first: the trace stops at the end.)
             if let Some((te, step, t)) = trace.as_mut()
                 && *te == e
+                && !ended
             {
                 t.cells.push(cell);
                 t.traversed.push(traversing[e]);
                 *step += 1;
-                if ended && t.episode_return == 0.0 {
-                    t.episode_return = m.episode_return;
-                }
             }
             if !self.hierarchical() {
                 (rewards[e], dones[e]) = a2c::task_step(m);
