@@ -170,12 +170,12 @@ pub fn advantages(
 ) -> (Vec<f32>, Vec<f32>) {
     let b = bootstrap.len();
     let n = rewards.len();
-    debug_assert!(b > 0 && n % b == 0 && values.len() == n && discounts.len() == n);
+    debug_assert!(b > 0 && n.is_multiple_of(b) && values.len() == n && discounts.len() == n);
     let steps = n / b;
     let mut adv = vec![0f32; n];
     let mut ret = vec![0f32; n];
-    for e in 0..b {
-        let mut next_value = bootstrap[e];
+    for (e, &boot) in bootstrap.iter().enumerate() {
+        let mut next_value = boot;
         let mut next_adv = 0f32;
         for k in (0..steps).rev() {
             let i = k * b + e;

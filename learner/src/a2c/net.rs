@@ -416,7 +416,7 @@ pub fn trunk_macs(trunk: &Trunk, bag: Option<f64>) -> (f64, f64) {
         trunk.conv2.ws.size()[0] as f64,
     ];
     let cin = trunk.in_channels as f64;
-    let hw2 = (((w + 1) / 2) * ((h + 1) / 2)) as f64;
+    let hw2 = (w.div_ceil(2) * h.div_ceil(2)) as f64;
     let hidden = trunk.hidden as f64;
     let conv1 = match bag {
         Some(b) => hw * c1 * b / 2.0,

@@ -96,8 +96,8 @@ impl Adam {
             self.t += 1;
             let c1 = 1.0 - BETA1.powi(self.t as i32);
             let c2 = 1.0 - BETA2.powi(self.t as i32);
-            for k in 0..self.params.len() {
-                let g = &grads[k] * scale;
+            for (k, g) in grads.iter().enumerate() {
+                let g = g * scale;
                 self.m[k] = &self.m[k] * BETA1 + &g * (1.0 - BETA1);
                 self.v[k] = &self.v[k] * BETA2 + g.square() * (1.0 - BETA2);
                 let step = (&self.m[k] / c1) / ((&self.v[k] / c2).sqrt() + EPS) * self.lr;

@@ -231,6 +231,12 @@ impl Manager {
                     rewards[i] = r;
                     discounts[i] = disc;
                     weights[i] = 1.0;
+                } else {
+                    // The interval under way only bootstraps: its value is
+                    // the next value of the last complete decision, and
+                    // its own TD error must be 0 so that no advantage
+                    // flows back through λ (reward V, discount 0).
+                    rewards[i] = d.value;
                 }
             }
         }

@@ -143,7 +143,7 @@ impl AgentConfig {
         if self.rollout_len == 0 {
             return Err(ConfigError::new("rollout_len", "must be at least 1"));
         }
-        if self.window != 0 && self.window % 2 == 0 {
+        if self.window != 0 && self.window.is_multiple_of(2) {
             return Err(ConfigError::new(
                 "window",
                 format!("{} must be odd", self.window),
@@ -697,8 +697,7 @@ impl HrlAgent {
             .expect("state")
             .scatter(&idx, &next);
         // Draw the goals.
-        let mut picks: Vec<(i64, i64, u32, u32, Vec<f32>, Vec<bool>)> =
-            Vec::with_capacity(who.len());
+        let mut picks: Vec<Pick> = Vec::with_capacity(who.len());
         match manager.head() {
             ManagerHead::Feudal { .. } => {
                 let pi = manager.feudal_policy(&h).expect("feudal");
@@ -1239,6 +1238,10 @@ impl HrlAgent {
         Ok(())
     }
 }
+
+/// One Manager choice: the wide and narrow indices as trained, the goal
+/// cells, and (WN) the local input and valid slots of the window.
+type Pick = (i64, i64, u32, u32, Vec<f32>, Vec<bool>);
 
 /// Counts of one rollout or evaluation.
 #[derive(Debug, Default)]

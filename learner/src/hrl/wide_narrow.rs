@@ -245,8 +245,7 @@ mod tests {
             // Wide logits [0, ln 2, ln 3] → π^ω = [1/6, 2/6, 3/6]; narrow
             // logits all 0 over 4 slots, slot 3 masked → uniform over 3.
             let mut w = head.wide.ws.shallow_clone();
-            let _ = w
-                .copy_(&Tensor::from_slice(&[0f32, 0., 2f32.ln(), 0., 3f32.ln(), 0.]).view([3, 2]));
+            w.copy_(&Tensor::from_slice(&[0f32, 0., 2f32.ln(), 0., 3f32.ln(), 0.]).view([3, 2]));
             let mut b = head.wide.bs.as_ref().expect("bias").shallow_clone();
             let _ = b.zero_();
             let _ = head.narrow_out.ws.shallow_clone().zero_();
