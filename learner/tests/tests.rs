@@ -6,3 +6,5 @@ mod tch_smoke;
 mod gcp_learns;
 // The latent model ranks a four-room maze's doorways as pivotal states.
 mod pivotal_doorways;
+// Stage 2: the A2C baseline and WN with traversal and π_g init learn.
+mod hrl_learns;
