@@ -19,7 +19,7 @@ impl<S: Service> PipelineNode<S> {
         &self,
         num_envs: u32,
     ) -> Result<(ServiceName, ActService<S>), ShmError> {
-        let exp = Expectation {
+        let mut exp = Expectation {
             channel: Channel::Act,
             types: vec![("user header", type_name_of::<ActHeader>())],
             attrs: vec![
@@ -27,6 +27,7 @@ impl<S: Service> PipelineNode<S> {
                 (ATTR_NUM_ENVS, num_envs.to_string()),
             ],
         };
+        exp.attrs.extend(self.task_attr());
         self.open_service(&exp, |node, name, verifier| {
             node.service_builder(name)
                 .publish_subscribe::<[u8]>()

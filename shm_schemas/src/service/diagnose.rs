@@ -20,7 +20,7 @@ use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::server::ServerCreateError;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
 
-use super::{ATTR_GRID, ATTR_NUM_ENVS, ATTR_SCHEMA_VERSION, ATTR_SLICES};
+use super::{ATTR_GRID, ATTR_NUM_ENVS, ATTR_SCHEMA_VERSION, ATTR_SLICES, ATTR_TASK};
 use crate::{Channel, SchemaError, ShmError};
 
 /// How an iceoryx2 error is handled by the retry loop.
@@ -166,6 +166,14 @@ fn attr_error(value: &str, e: impl Debug) -> ShmError {
     }
 }
 
+/// `"doorkey/6"` → `"doorkey (6 actions)"`.
+fn describe_task(attr: &str) -> String {
+    match attr.split_once('/') {
+        Some((task, n)) => format!("{task} ({n} actions)"),
+        None => attr.to_owned(),
+    }
+}
+
 /// Splits `"wg.ObsHeader.v3"` into `("wg.ObsHeader", 3)`.
 fn split_version(name: &str) -> Option<(&str, u32)> {
     let (base, v) = name.rsplit_once(".v")?;
@@ -294,16 +302,30 @@ pub(super) fn diagnose<S: Service>(
                             wire: w,
                         })
                 }
+                // The attribute counts one slice's environments; the user
+                // chose the whole batch (`--envs`), and the slicing, checked
+                // first, is the same on both ends here.
                 ATTR_NUM_ENVS => {
-                    wire.parse()
+                    let slices: u32 = exp
+                        .attrs
+                        .iter()
+                        .find(|(k, _)| *k == ATTR_SLICES)
+                        .and_then(|(_, v)| v.parse().ok())
+                        .unwrap_or(1);
+                    wire.parse::<u32>()
                         .ok()
-                        .zip(ours.parse().ok())
+                        .zip(ours.parse::<u32>().ok())
                         .map(|(w, o)| SchemaError::BatchSize {
                             channel,
-                            expected: o,
-                            wire: w,
+                            expected: o * slices,
+                            wire: w * slices,
                         })
                 }
+                ATTR_TASK => Some(SchemaError::Task {
+                    channel,
+                    expected: describe_task(ours),
+                    wire: describe_task(wire),
+                }),
                 _ => None,
             };
         return mismatch.unwrap_or_else(|| SchemaError::Incompatible {

@@ -215,3 +215,74 @@ pub fn teardown_run<S: Service>(config: &Config) -> Result<Vec<PathBuf>, ShmErro
     remove_global_mgmt(&prefix)?;
     Ok(shm_files(&prefix)?.into_iter().map(|(p, _)| p).collect())
 }
+
+/// The iceoryx2 prefixes under [`SHM_DIR`] that start with `root` (e.g.
+/// [`crate::service::PREFIX_ROOT`], `wg_`): each file named
+/// `<prefix><40 hex digits>{_,.}…` contributes its prefix.
+pub fn shm_prefixes(root: &str) -> Result<Vec<String>, ShmError> {
+    let mut prefixes: Vec<String> = files_with_prefix(StdPath::new(SHM_DIR), root)?
+        .into_iter()
+        .filter_map(|(path, _)| {
+            let name = path.file_name()?.to_string_lossy().into_owned();
+            // The hash starts after the last '_' that is followed by 40 hex
+            // digits and a separator.
+            (root.len()..name.len())
+                .rev()
+                .filter(|&i| name.as_bytes()[i - 1] == b'_')
+                .find(|&i| is_iceoryx2_name_after_prefix(&name.as_bytes()[i..]))
+                .map(|i| name[..i].to_owned())
+        })
+        .collect();
+    prefixes.sort();
+    prefixes.dedup();
+    Ok(prefixes)
+}
+
+/// What [`sweep_stale_prefixes`] removed for one prefix.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Swept {
+    /// The iceoryx2 prefix (`wg_<run>_`).
+    pub prefix: String,
+    /// The files removed.
+    pub removed: Vec<PathBuf>,
+}
+
+/// Removes the shared memory of every prefix under `root` (`wg_`) that no
+/// live process uses: a killed run's dead nodes are cleaned up, then the
+/// leftover `global_mgmt` segments removed ([`teardown_run`]). A prefix
+/// with a live node is left alone, and so is one whose newest file is
+/// younger than `min_age` (a run that is starting up has files before its
+/// first node is registered). Returns what was removed, prefix by prefix.
+pub fn sweep_stale_prefixes<S: Service>(
+    root: &str,
+    min_age: Duration,
+) -> Result<Vec<Swept>, ShmError> {
+    let mut out = Vec::new();
+    for prefix in shm_prefixes(root)? {
+        let before: Vec<PathBuf> = shm_files(&prefix)?.into_iter().map(|(p, _)| p).collect();
+        let young = before.iter().any(|p| {
+            std::fs::metadata(p)
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_none_or(|age| age < min_age)
+        });
+        if young || before.is_empty() {
+            continue;
+        }
+        let config = super::names::isolated_config(&prefix)?;
+        match teardown_run::<S>(&config) {
+            Ok(left) => {
+                let removed: Vec<PathBuf> =
+                    before.into_iter().filter(|p| !left.contains(p)).collect();
+                if !removed.is_empty() {
+                    out.push(Swept { prefix, removed });
+                }
+            }
+            // A live node: its run is not stale.
+            Err(ShmError::StillInUse { .. }) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(out)
+}

@@ -24,7 +24,8 @@
 //! the user-header / payload type names carry the version
 //! (`wg.ObsHeader.v2`: iceoryx2 itself refuses another version with
 //! `IncompatibleTypes`), and service *attributes* carry
-//! `wg.schema_version`, `wg.num_envs` and `wg.grid` (`"WxH"`), which
+//! `wg.schema_version`, `wg.num_envs`, `wg.grid` (`"WxH"`) and, for nodes
+//! that run a task, `wg.task` (`"doorkey/6"`: task and action count), which
 //! `open_or_create_with_attributes` verifies (`IncompatibleAttributes`).
 //! When iceoryx2 refuses, [`PipelineNode`] reads the existing service's
 //! static description (`Service::details`) and turns the refusal into a
@@ -93,8 +94,8 @@ mod route;
 
 pub use act::{ActPublisher, ActSample, ActSampleMut, ActSubscriber};
 pub use files::{
-    NodeSummary, cleanup_dead_nodes, harden_shm_permissions, list_dead_nodes, list_nodes,
-    remove_global_mgmt, shm_files, teardown_run,
+    NodeSummary, Swept, cleanup_dead_nodes, harden_shm_permissions, list_dead_nodes, list_nodes,
+    remove_global_mgmt, shm_files, shm_prefixes, sweep_stale_prefixes, teardown_run,
 };
 pub use graph::{GraphPublisher, GraphSample, GraphSampleMut, GraphSubscriber};
 pub use names::{
@@ -116,6 +117,9 @@ pub const ATTR_NUM_ENVS: &str = "wg.num_envs";
 pub const ATTR_GRID: &str = "wg.grid";
 /// Attribute key: slices per observation batch ([`crate::ObsShape::slices`]).
 pub const ATTR_SLICES: &str = "wg.slices";
+/// Attribute key: the task and its action count, `"<task>/<actions>"`
+/// ([`PipelineNode::with_task`]); on the obs and act services.
+pub const ATTR_TASK: &str = "wg.task";
 /// Default time [`PipelineNode`] keeps retrying transient iceoryx2 errors.
 pub const DEFAULT_RETRY_TIMEOUT: Duration = Duration::from_secs(5);
 /// Directory of POSIX shared memory on Linux.

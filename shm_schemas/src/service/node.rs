@@ -47,6 +47,8 @@ pub struct PipelineNode<S: Service> {
     pub(super) node: Node<S>,
     pub(super) run: RunName,
     retry_timeout: Duration,
+    /// `"<task>/<actions>"` ([`PipelineNode::with_task`]).
+    task: Option<String>,
     /// Set once this node opened any of the run's services.
     opened: AtomicBool,
 }
@@ -62,6 +64,7 @@ impl<S: Service> PipelineNode<S> {
             node: create_node(config, node_name)?,
             run,
             retry_timeout: DEFAULT_RETRY_TIMEOUT,
+            task: None,
             opened: AtomicBool::new(false),
         })
     }
@@ -70,6 +73,21 @@ impl<S: Service> PipelineNode<S> {
     pub fn with_retry_timeout(mut self, timeout: Duration) -> PipelineNode<S> {
         self.retry_timeout = timeout;
         self
+    }
+
+    /// Makes the task (its name and number of actions) part of the obs
+    /// and act services' identity (attribute `wg.task`): a learner or
+    /// planner of another task is refused at open with
+    /// [`crate::SchemaError::Task`] instead of exchanging batches it
+    /// misreads. Every process of a run must set it, or none.
+    pub fn with_task(mut self, task: &str, num_actions: usize) -> PipelineNode<S> {
+        self.task = Some(format!("{task}/{num_actions}"));
+        self
+    }
+
+    /// The `wg.task` attribute this node requires, if any.
+    pub(super) fn task_attr(&self) -> Option<(&'static str, String)> {
+        self.task.clone().map(|t| (super::ATTR_TASK, t))
     }
 
     /// The iceoryx2 node (for events, WaitSets, listing).

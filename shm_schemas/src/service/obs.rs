@@ -20,7 +20,7 @@ impl<S: Service> PipelineNode<S> {
         &self,
         shape: &ObsShape,
     ) -> Result<(ServiceName, ObsService<S>), ShmError> {
-        let exp = Expectation {
+        let mut exp = Expectation {
             channel: Channel::Obs,
             types: vec![("user header", type_name_of::<ObsHeader>())],
             attrs: vec![
@@ -32,6 +32,7 @@ impl<S: Service> PipelineNode<S> {
                 (ATTR_GRID, shape.grid_attr()),
             ],
         };
+        exp.attrs.extend(self.task_attr());
         self.open_service(&exp, |node, name, verifier| {
             node.service_builder(name)
                 .publish_subscribe::<[u64]>()
