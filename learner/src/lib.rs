@@ -13,6 +13,7 @@
 
 pub mod actor_critic;
 pub mod batch_env;
+pub mod checkpoint;
 pub mod discovery;
 pub mod edge_refinement;
 pub mod error;
