@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod bench_pipeline;
 pub mod bench_planner;
+pub mod clean;
 pub mod demo;
 pub mod discover;
 pub mod run;
