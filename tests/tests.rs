@@ -6,3 +6,7 @@ mod cli;
 mod discover;
 // The three processes over shared memory: exchange, refusal, death and rejoin.
 mod pipeline;
+// Property tests over layouts, discovery configs and role arguments.
+mod fuzz;
+// Failures that must be clean and runs that must not collide (issue 14).
+mod reliability;
