@@ -121,7 +121,7 @@ pub fn commit(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), LearnerError> {
         for (name, bytes) in files {
             // Errors name the file as the user knows it: <dir>/<name>.
             write_file(&staging.join(name), bytes).map_err(|e| match e {
-                LearnerError::Checkpoint { message, .. } => error(&dir.join(name), message),
+                LearnerError::Checkpoint { message, .. } => error(dir.join(name), message),
                 other => other,
             })?;
         }
