@@ -112,7 +112,17 @@ fn main() -> ExitCode {
         Err(e) => {
             // A libtorch error carries a C++ backtrace after its first line:
             // kept for WORLDGRAPH_LOG=debug.
-            let full = format!("{e:#}");
+            // Each cause once: an error whose message already quotes its
+            // source (a layout error naming the file and line) is not
+            // followed by that source again.
+            let mut parts: Vec<String> = Vec::new();
+            for cause in e.chain() {
+                let s = cause.to_string();
+                if !parts.last().is_some_and(|p| p.contains(&s)) {
+                    parts.push(s);
+                }
+            }
+            let full = parts.join(": ");
             let short: Vec<&str> = full
                 .lines()
                 .take_while(|l| !l.starts_with("Exception raised from") && !l.contains("frame #"))

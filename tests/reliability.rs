@@ -163,6 +163,10 @@ fn run_refuses_a_bad_configuration_before_starting_anything() {
         assert!(!out.status.success(), "{name}: accepted: {err}");
         assert!(err.contains(needle), "{name}: {needle:?} not in: {err}");
         assert!(!err.contains("restarting"), "{name}: restarted: {err}");
+        // Each cause is printed once.
+        for cause in ["ragged row", "No such file or directory"] {
+            assert!(err.matches(cause).count() <= 1, "{name}: twice: {err}");
+        }
         no_crash_text(&err);
         assert!(shm_files(&run).is_empty(), "{name}: {:?}", shm_files(&run));
         assert!(
