@@ -58,6 +58,9 @@ enum Command {
     /// Benchmarks that print figures (never assertions).
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+    /// Remove the shared memory (`/dev/shm/wg_*`) that dead runs left
+    /// behind, saying what was removed; runs with a live process are kept.
+    Clean(commands::clean::CleanArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -87,6 +90,7 @@ fn run() -> anyhow::Result<ExitCode> {
         Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
         Command::Planner(PlannerCommand::Serve(a)) => roles::planner::serve(a),
         Command::Bench(cmd) => commands::bench::run(cmd),
+        Command::Clean(a) => commands::clean::run(a),
     }
 }
 
@@ -111,11 +115,32 @@ fn main() -> ExitCode {
                 .unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     match run() {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // A libtorch error carries a C++ backtrace after its first line:
+            // kept for WORLDGRAPH_LOG=debug.
+            // Each cause once: an error whose message already quotes its
+            // source (a layout error naming the file and line) is not
+            // followed by that source again.
+            let mut parts: Vec<String> = Vec::new();
+            for cause in e.chain() {
+                let s = cause.to_string();
+                if !parts.last().is_some_and(|p| p.contains(&s)) {
+                    parts.push(s);
+                }
+            }
+            let full = parts.join(": ");
+            let short: Vec<&str> = full
+                .lines()
+                .take_while(|l| !l.starts_with("Exception raised from") && !l.contains("frame #"))
+                .collect();
+            eprintln!("error: {}", short.join("\n"));
+            if short.len() < full.lines().count() {
+                tracing::debug!("full error: {full}");
+            }
             ExitCode::FAILURE
         }
     }

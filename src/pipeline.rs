@@ -171,6 +171,14 @@ impl Pipeline {
             .map(Child::id)
     }
 
+    /// How long `role`'s latest process ran (or has been running).
+    pub fn uptime(&self, role: Role) -> Duration {
+        self.slots
+            .iter()
+            .find(|s| s.role == role)
+            .map_or(Duration::ZERO, |s| s.started.elapsed())
+    }
+
     /// Restarts so far of `role`.
     pub fn restarts(&self, role: Role) -> u32 {
         self.slots

@@ -8,3 +8,7 @@ mod discover;
 mod pipeline;
 // Stage 2: the protocol's files, determinism, kill and resume, refusals.
 mod train;
+// Property tests over layouts, discovery configs and role arguments.
+mod fuzz;
+// Failures that must be clean and runs that must not collide (issue 14).
+mod reliability;

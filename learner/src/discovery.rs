@@ -34,6 +34,7 @@ use serde::{Deserialize, Serialize};
 use sim::{Layout, Object, action, flags};
 
 use crate::batch_env::{BatchEnvironment, EnvError};
+use crate::checkpoint;
 use crate::edge_refinement::{RefinementStats, refine_with_gcp};
 use crate::error::LearnerError;
 use crate::gcp::{GcpConfig, GcpStats, GoalConditionedPolicy};
@@ -647,13 +648,15 @@ impl Discovery {
         Ok(stats)
     }
 
-    /// Saves the loop's state into `dir` (atomically, file by file; the
-    /// state file is written last, so a checkpoint is complete when it names
-    /// the round).
+    /// Saves the loop's state into `dir` as one commit
+    /// ([`crate::checkpoint::commit`]): the weights are serialised in
+    /// memory, and `latent.ot`, `gcp.ot` and `state.json` replace the
+    /// previous checkpoint together or not at all. A failed write (a full
+    /// disk) is an error naming the file and the cause, and leaves the
+    /// previous checkpoint intact.
     pub fn save(&mut self, dir: &Path) -> Result<(), LearnerError> {
-        std::fs::create_dir_all(dir).map_err(|e| ckpt(dir, e))?;
-        save_vars(self.latent.var_store(), &dir.join("latent.ot"))?;
-        save_vars(self.gcp.var_store(), &dir.join("gcp.ot"))?;
+        let latent = checkpoint::var_store_bytes(self.latent.var_store())?;
+        let gcp = checkpoint::var_store_bytes(self.gcp.var_store())?;
         self.state.buffer = self
             .buffer
             .iter()
@@ -668,34 +671,46 @@ impl Discovery {
             })
             .collect();
         self.state.multipliers = Some(*self.latent.model().multipliers());
-        let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e))?;
+        let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e));
         self.state.buffer.clear();
-        let path = dir.join("state.json");
-        sim::render::write_atomic(&path, &json).map_err(|e| ckpt(&path, e))
+        checkpoint::commit(
+            dir,
+            &[
+                ("latent.ot", &latent),
+                ("gcp.ot", &gcp),
+                ("state.json", &json?),
+            ],
+        )
     }
 
     /// Resumes from a checkpoint in `dir` if there is one for this
-    /// configuration and layout; returns whether it did.
+    /// configuration and layout; returns whether it did. A larger budget
+    /// (`max_rounds`, `patience`) is a continuation: the new one applies.
+    /// Any other difference is refused, naming the field.
     pub fn resume(&mut self, dir: &Path) -> Result<bool, LearnerError> {
+        checkpoint::recover(dir)?;
         let path = dir.join("state.json");
         let Ok(bytes) = std::fs::read(&path) else {
             return Ok(false);
         };
         let state: State = serde_json::from_slice(&bytes).map_err(|e| ckpt(&path, e))?;
-        if state.config != self.state.config || state.layout_name != self.layout.name {
+        if state.layout_name != self.layout.name {
             return Err(ckpt(
                 &path,
                 format!(
-                    "belongs to another configuration or maze ({}); use another run directory",
-                    state.layout_name
+                    "belongs to maze {:?}, this run uses {:?}; use another run directory",
+                    state.layout_name, self.layout.name
                 ),
             ));
         }
+        if let Some(field) = config_difference(&state.config, &self.state.config) {
+            return Err(ckpt(
+                &path,
+                format!("{field}; use another run directory or the same configuration"),
+            ));
+        }
         let latent = dir.join("latent.ot");
-        self.latent
-            .var_store_mut()
-            .load(&latent)
-            .map_err(|e| ckpt(&latent, e))?;
+        checkpoint::load_var_store_file(self.latent.var_store_mut(), &latent)?;
         self.gcp.load(dir.join("gcp.ot"))?;
         if let Some(m) = state.multipliers {
             self.latent.model_mut().set_multipliers(m);
@@ -717,6 +732,7 @@ impl Discovery {
             .collect();
         self.state = State {
             buffer: Vec::new(),
+            config: self.state.config.clone(),
             ..state
         };
         Ok(true)
@@ -778,10 +794,38 @@ fn ckpt(path: &Path, e: impl std::fmt::Display) -> LearnerError {
     }
 }
 
-/// `VarStore::save` through a temporary file and a rename, so a crash never
-/// leaves a torn weight file behind.
-fn save_vars(vs: &tch::nn::VarStore, path: &Path) -> Result<(), LearnerError> {
-    let tmp = path.with_extension("ot.tmp");
-    vs.save(&tmp).map_err(|e| ckpt(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| ckpt(path, e))
+/// The first field (dotted path) in which a checkpoint's configuration
+/// `saved` differs from this run's `now`, budget fields (`max_rounds`,
+/// `patience`) aside: "config field gcp.lr is 0.001 in the checkpoint, 0.002 now".
+pub fn config_difference(saved: &DiscoveryConfig, now: &DiscoveryConfig) -> Option<String> {
+    fn walk(path: &str, a: &serde_json::Value, b: &serde_json::Value) -> Option<String> {
+        match (a, b) {
+            (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+                let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+                keys.sort();
+                keys.dedup();
+                keys.into_iter().find_map(|k| {
+                    let sub = if path.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{path}.{k}")
+                    };
+                    if path.is_empty() && (k == "max_rounds" || k == "patience") {
+                        return None;
+                    }
+                    let null = serde_json::Value::Null;
+                    walk(&sub, x.get(k).unwrap_or(&null), y.get(k).unwrap_or(&null))
+                })
+            }
+            _ if a == b => None,
+            _ => Some(format!(
+                "config field {path} is {a} in the checkpoint, {b} now"
+            )),
+        }
+    }
+    let (a, b) = (
+        serde_json::to_value(saved).ok()?,
+        serde_json::to_value(now).ok()?,
+    );
+    walk("", &a, &b)
 }

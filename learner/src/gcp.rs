@@ -613,17 +613,17 @@ impl GoalConditionedPolicy {
         &self.vs
     }
 
-    /// Saves the weights.
+    /// Saves the weights, serialised in memory and written atomically
+    /// ([`crate::checkpoint`]): a full disk is an error naming the file,
+    /// never an abort or a torn file.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), LearnerError> {
-        let path = path.as_ref();
-        self.vs.save(path).map_err(|e| checkpoint_error(path, e))
+        crate::checkpoint::save_var_store_file(&self.vs, path.as_ref())
     }
 
     /// Loads weights saved by [`Self::save`] from a policy of the same
     /// configuration.
     pub fn load(&mut self, path: impl AsRef<Path>) -> Result<(), LearnerError> {
-        let path = path.as_ref();
-        self.vs.load(path).map_err(|e| checkpoint_error(path, e))
+        crate::checkpoint::load_var_store_file(&mut self.vs, path.as_ref())
     }
 
     /// The trajectories of the goal episodes finished since the last call,
@@ -866,13 +866,6 @@ impl GoalConditionedPolicy {
         } else {
             successes as f64 / finished as f64
         })
-    }
-}
-
-fn checkpoint_error(path: &Path, e: tch::TchError) -> LearnerError {
-    LearnerError::Checkpoint {
-        path: path.display().to_string(),
-        message: e.to_string(),
     }
 }
 

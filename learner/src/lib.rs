@@ -13,6 +13,7 @@
 
 pub mod a2c;
 pub mod batch_env;
+pub mod checkpoint;
 pub mod discovery;
 pub mod edge_refinement;
 pub mod error;

@@ -39,6 +39,9 @@ pub struct ShmEnvOptions {
     pub connect_timeout: Duration,
     /// Set by a signal handler to stop waiting.
     pub stop: Option<Arc<AtomicBool>>,
+    /// The task this process runs ([`sim::Task::name`]): with it, a sim of
+    /// another task is refused at connect ([`PipelineNode::with_task`]).
+    pub task: Option<String>,
 }
 
 impl Default for ShmEnvOptions {
@@ -49,6 +52,7 @@ impl Default for ShmEnvOptions {
             peer_timeout: Duration::from_millis(500),
             connect_timeout: Duration::from_secs(30),
             stop: None,
+            task: None,
         }
     }
 }
@@ -100,7 +104,10 @@ impl<S: Service> ShmEnv<S> {
         num_actions: usize,
         opts: ShmEnvOptions,
     ) -> Result<ShmEnv<S>, EnvError> {
-        let node = PipelineNode::<S>::new(config, run, &opts.node_name)?;
+        let mut node = PipelineNode::<S>::new(config, run, &opts.node_name)?;
+        if let Some(task) = &opts.task {
+            node = node.with_task(task, num_actions);
+        }
         node.cleanup_dead_nodes();
         let obs = node.obs_subscriber(shape)?;
         let act = node.act_publisher(shape.num_envs as usize)?;

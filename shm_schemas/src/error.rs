@@ -89,6 +89,19 @@ pub enum SchemaError {
         /// Batch size on the wire.
         wire: u32,
     },
+    /// The two ends run different tasks (another reward, another action
+    /// set): seen in the service's `wg.task` attribute when opening.
+    #[error(
+        "{channel}: this process runs task {expected}, the run's {channel} service carries task {wire}"
+    )]
+    Task {
+        /// Which channel.
+        channel: Channel,
+        /// `<task> (<n> actions)` this process runs.
+        expected: String,
+        /// `<task> (<n> actions)` of the service.
+        wire: String,
+    },
     /// A sample belongs to another run (its header's `run_id`).
     #[error("{channel}: sample of run {wire:#018x}, this process belongs to run {expected:#018x}")]
     RunMismatch {

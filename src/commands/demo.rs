@@ -61,7 +61,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<std::process::ExitCode> {
     super::discover::run(DiscoverArgs {
         maze: Maze::Small,
         layout: None,
-        seed: a.seed,
+        seed: Some(a.seed),
         run_dir: Some(discovery.clone()),
         envs: 32,
         rounds: Some(a.rounds),

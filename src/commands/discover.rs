@@ -32,9 +32,10 @@ pub struct DiscoverArgs {
     /// A layout file instead of an embedded maze.
     #[arg(long)]
     pub layout: Option<PathBuf>,
-    /// Seed of the environments and of the models.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// Seed of the environments and of the models [default: 0, or the
+    /// --config file's `seed`].
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Run directory (checkpoints, graph, pictures); an interrupted run
     /// resumes from it [default: runs/discover-<maze>-<seed>].
     #[arg(long = "run", alias = "run-dir")]
@@ -53,7 +54,11 @@ pub struct DiscoverArgs {
     /// keep the walks' paths) [default: 100, or the --config file's].
     #[arg(long)]
     pub gcp_iters: Option<u32>,
-    /// A JSON file of discovery settings (any subset of `DiscoveryConfig`).
+    /// A TOML file of discovery settings (any subset of `DiscoveryConfig`;
+    /// an unknown key is an error). The resolved settings are written to
+    /// `<run>/config.toml` with digests of the layout and the settings; a
+    /// resumed run must match them (a larger --rounds or --patience is a
+    /// continuation).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Run as the pipeline's processes: the environments in a sim process,
@@ -115,12 +120,12 @@ pub struct DiscoverySummary {
     pub pivotal_cells: Vec<[u16; 2]>,
 }
 
-fn world(a: &DiscoverArgs) -> WorldArgs {
+fn world(a: &DiscoverArgs, seed: u64) -> WorldArgs {
     WorldArgs {
         maze: a.maze,
         layout: a.layout.clone(),
         task: Task::MultiGoal,
-        seed: a.seed,
+        seed,
         // Long episodes and no random balls: discovery explores a fixed,
         // deterministic maze (recorded paths must replay exactly).
         max_steps: Some(100_000),
@@ -128,22 +133,110 @@ fn world(a: &DiscoverArgs) -> WorldArgs {
     }
 }
 
+/// Reads a TOML discovery config (unknown keys refused).
+fn read_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
+    let text =
+        std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    toml::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "{} is not a valid discovery config (TOML): {}",
+            p.display(),
+            e.to_string().trim_end()
+        )
+    })
+}
+
+/// What a run directory was started with (`<run>/config.toml`): the
+/// layout (name, size, FNV-1a digest of its cells) and the resolved
+/// settings with their digest. A resumed run must match it, budget aside.
+#[derive(Debug, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RunIdentity {
+    layout: String,
+    layout_size: String,
+    layout_digest: String,
+    envs: usize,
+    config_digest: String,
+    discovery: DiscoveryConfig,
+}
+
+fn fnv1a(bytes: &[u8]) -> String {
+    let h = bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    });
+    format!("{h:016x}")
+}
+
+impl RunIdentity {
+    fn new(layout: &Layout, envs: usize, cfg: &DiscoveryConfig) -> RunIdentity {
+        let mut identity = cfg.clone();
+        // The budget may grow on a resumed run: not part of the digest.
+        identity.max_rounds = 0;
+        identity.patience = 0;
+        RunIdentity {
+            layout: layout.name.clone(),
+            layout_size: format!("{}x{}", layout.width, layout.height),
+            layout_digest: fnv1a(layout.to_text().as_bytes()),
+            envs,
+            config_digest: fnv1a(toml::to_string(&identity).unwrap_or_default().as_bytes()),
+            discovery: cfg.clone(),
+        }
+    }
+
+    /// Refuses a run directory started with another layout or settings
+    /// (naming what differs), then records this identity.
+    fn check_and_record(&self, dir: &Path) -> anyhow::Result<()> {
+        let path = dir.join("config.toml");
+        if let Ok(text) = std::fs::read_to_string(&path) {
+            let old: RunIdentity = toml::from_str(&text)
+                .with_context(|| format!("{} is not a run identity", path.display()))?;
+            let refuse = |what: String| {
+                anyhow::anyhow!(
+                    "{} was started with {what}; use another --run directory or the same settings",
+                    dir.display()
+                )
+            };
+            if old.layout != self.layout || old.layout_size != self.layout_size {
+                return Err(refuse(format!(
+                    "layout {} ({}), this run uses {} ({})",
+                    old.layout, old.layout_size, self.layout, self.layout_size
+                )));
+            }
+            if old.layout_digest != self.layout_digest {
+                return Err(refuse(format!(
+                    "another version of layout {} (cells digest {}, now {}): the file was edited",
+                    self.layout, old.layout_digest, self.layout_digest
+                )));
+            }
+            if old.envs != self.envs {
+                return Err(refuse(format!(
+                    "--envs {}, this run uses {}",
+                    old.envs, self.envs
+                )));
+            }
+            if let Some(diff) =
+                learner::discovery::config_difference(&old.discovery, &self.discovery)
+            {
+                return Err(refuse(diff.replace("in the checkpoint", "there")));
+            }
+        }
+        let text = toml::to_string(self).context("cannot write the run identity as TOML")?;
+        sim::render::write_atomic(&path, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        Ok(())
+    }
+}
+
 /// Runs `worldgraph discover`.
 pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
-    let w = world(&a);
-    let (layout, env_cfg) = w.build()?;
-    let dir = a.run_dir.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, a.seed))
-    });
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let mut cfg: DiscoveryConfig = match &a.config {
-        Some(p) => serde_json::from_slice(
-            &std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?,
-        )
-        .with_context(|| format!("{} is not a valid discovery config", p.display()))?,
+        Some(p) => read_config(p)?,
         None => DiscoveryConfig::default(),
     };
-    cfg.seed = a.seed;
+    // A flag given overrides the file; a flag not given keeps the file's value.
+    if let Some(s) = a.seed {
+        cfg.seed = s;
+    }
     if let Some(r) = a.rounds {
         cfg.max_rounds = r;
     }
@@ -153,6 +246,14 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(g) = a.gcp_iters {
         cfg.gcp_iters_per_round = g;
     }
+    let seed = cfg.seed;
+    let w = world(&a, seed);
+    let (layout, env_cfg) = w.build()?;
+    let dir = a.run_dir.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, cfg.seed))
+    });
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    RunIdentity::new(&layout, a.envs, &cfg).check_and_record(&dir)?;
     let num_actions = env_cfg.task.num_actions();
     let mut disc = Discovery::new(cfg, &layout, a.envs, num_actions)?;
     let ckpt = dir.join("checkpoint");
@@ -197,6 +298,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
             node_name: LEARNER_NODE.into(),
             sim_node_name: SIM_NODE.into(),
             connect_timeout: Duration::from_secs(60),
+            task: Some(env_cfg.task.name().into()),
             ..ShmEnvOptions::default()
         };
         Box::new(ShmEnv::<ipc::Service>::connect(
@@ -207,7 +309,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
             opts,
         )?)
     } else {
-        Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, a.seed, 1)?)
+        Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, seed, 1)?)
     };
 
     let total = disc.config().max_rounds as u64;
@@ -223,10 +325,15 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         let s = disc.round(env.as_mut())?;
         disc.save(&ckpt)?;
         bar.set_position(disc.rounds_done() as u64);
-        bar.set_message(format!(
+        let line = format!(
             "acc {:.3}  π_g {:.2}  |V_p| {}  cells {}",
             s.reconstruction_accuracy, s.gcp_success, s.pivotal_states, s.cells_visited
-        ));
+        );
+        // No bar on a non-terminal stderr (a log file, CI): a line per round.
+        if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            eprintln!("discover: round {}/{total}  {line}", disc.rounds_done());
+        }
+        bar.set_message(line);
     }
     bar.finish_and_clear();
     let gcp_success = disc.evaluate_gcp(env.as_mut(), 10, 200)?;
@@ -286,7 +393,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         .count();
     let summary = DiscoverySummary {
         maze: layout.name.clone(),
-        seed: a.seed,
+        seed,
         transport: summary_transport.into(),
         rounds: disc.rounds_done(),
         pivotal_states: pivotal.len(),

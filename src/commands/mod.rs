@@ -4,6 +4,7 @@ pub mod bench;
 pub mod bench_learner;
 pub mod bench_pipeline;
 pub mod bench_planner;
+pub mod clean;
 pub mod demo;
 pub mod discover;
 pub mod run;

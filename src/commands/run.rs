@@ -18,7 +18,7 @@ use shm_schemas::service::{RunName, run_config, teardown_run};
 use crate::pipeline::{Pipeline, Role, world_words};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
-use crate::roles::{EXIT_PEER_DIED, OnPeerDeath, RunArgs};
+use crate::roles::{EXIT_CONFIG, EXIT_PEER_DIED, OnPeerDeath, RunArgs};
 use crate::world::WorldArgs;
 
 /// `run` options.
@@ -145,6 +145,23 @@ impl RunCmdArgs {
         }
     }
 
+    /// Checks everything the roles would refuse before starting any of
+    /// them: the layout, the batch shape, the planner's settings and node
+    /// file, and that no live process holds the run already.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let run = RunName::new(&self.run.run)?;
+        let (layout, _) = self.world.build()?;
+        shm_schemas::ObsShape::sliced(self.envs, self.slices, layout.width, layout.height)?;
+        self.graph.config(&self.world).validate()?;
+        if let Some(path) = &self.graph.node_file {
+            planner::pivotal::read_node_file(&layout, path)?;
+        }
+        if let Some(d) = self.run.duration {
+            anyhow::ensure!(d > 0.0, "--duration must be positive");
+        }
+        refuse_live_run(&run)
+    }
+
     /// A pipeline of the three roles.
     pub fn pipeline(&self) -> anyhow::Result<Pipeline> {
         anyhow::ensure!(
@@ -158,6 +175,33 @@ impl RunCmdArgs {
         Pipeline::new(roles, self.logs_to_files.then_some(dir.as_path()))
     }
 }
+
+/// Refuses a run name that a live process already uses (another `run`,
+/// `soak` or a role started by hand), naming the process: two runs of one
+/// name would share the services and the run directory.
+pub fn refuse_live_run(run: &RunName) -> anyhow::Result<()> {
+    let config = run_config(run)?;
+    let live: Vec<_> = shm_schemas::service::list_nodes::<ipc::Service>(&config)
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|n| n.alive)
+        .collect();
+    if let Some(n) = live.first() {
+        anyhow::bail!(
+            "run '{run}' is in use: its {} node is held by process {} ({}); stop that run \
+             or choose another --run",
+            n.name,
+            n.pid,
+            n.executable
+        );
+    }
+    Ok(())
+}
+
+/// A role that dies this soon after its start counts as a fast failure.
+pub const FAST_FAILURE: Duration = Duration::from_secs(3);
+/// Consecutive fast failures of one role after which `run` gives up.
+pub const MAX_FAST_FAILURES: u32 = 3;
 
 /// Installs SIGINT/SIGTERM handlers that set the returned flag.
 pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
@@ -248,21 +292,39 @@ pub fn print_summary(dir: &Path, restarts: &[(Role, u32)], leftovers: &[PathBuf]
 
 /// Runs `worldgraph run`.
 pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
-    RunName::new(&a.run.run)?;
+    a.validate()?;
+    crate::roles::sweep_stale_runs("run");
     let stop = stop_flag()?;
     let mut p = a.pipeline()?;
     p.start_all()?;
-    let deadline = a
-        .run
-        .duration
-        .map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let started = Instant::now();
+    let deadline = a.run.duration.map(|d| started + Duration::from_secs_f64(d));
+    let quiet_stderr = !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let mut next_progress = started + Duration::from_secs(10);
+    let mut fast_failures = [0u32; 3];
     let mut failed = false;
     'watch: loop {
         std::thread::sleep(Duration::from_millis(50));
         if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
             break;
         }
+        if quiet_stderr && Instant::now() >= next_progress {
+            next_progress += Duration::from_secs(10);
+            let restarts: u32 = Role::ALL.iter().map(|&r| p.restarts(r)).sum();
+            eprintln!(
+                "run: {:.0} s, {restarts} restart(s)",
+                started.elapsed().as_secs_f64()
+            );
+        }
         for (role, status) in p.poll_exited() {
+            if status.code() == Some(EXIT_CONFIG as i32) {
+                eprintln!(
+                    "run: the {} process refused its configuration (see above); stopping the run",
+                    role.name()
+                );
+                failed = true;
+                break 'watch;
+            }
             if status.code() == Some(EXIT_PEER_DIED as i32) || status.success() {
                 eprintln!(
                     "run: the {} process ended ({status}); stopping the run",
@@ -271,6 +333,22 @@ pub fn run(a: RunCmdArgs) -> anyhow::Result<std::process::ExitCode> {
                 break 'watch;
             }
             eprintln!("run: the {} process died ({status})", role.name());
+            let slot = Role::ALL.iter().position(|&r| r == role).unwrap_or(0);
+            if p.uptime(role) < FAST_FAILURE {
+                fast_failures[slot] += 1;
+            } else {
+                fast_failures[slot] = 1;
+            }
+            if fast_failures[slot] >= MAX_FAST_FAILURES {
+                eprintln!(
+                    "run: the {} process died {MAX_FAST_FAILURES} times within {} s of its \
+                     start; giving up",
+                    role.name(),
+                    FAST_FAILURE.as_secs()
+                );
+                failed = true;
+                break 'watch;
+            }
             if a.run.on_peer_death == OnPeerDeath::Wait {
                 eprintln!("run: restarting the {} process", role.name());
                 p.spawn(role)?;

@@ -170,6 +170,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         logs_to_files: true,
         pin: false,
     };
+    args.validate()?;
     let stop = stop_flag()?;
     let mut p = args.pipeline()?;
     p.start_all()?;
@@ -218,6 +219,17 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
                 }
             }
             bar.set_position((now - start).as_secs());
+            // No bar on a non-terminal stderr: a line every 10 s instead.
+            let secs = (now - start).as_secs();
+            if secs > 0
+                && secs.is_multiple_of(10)
+                && !std::io::IsTerminal::is_terminal(&std::io::stderr())
+            {
+                eprintln!(
+                    "soak: {secs} s, kills {}",
+                    recoveries.len() + usize::from(pending.is_some())
+                );
+            }
             bar.set_message(format!(
                 "kills {}",
                 recoveries.len() + usize::from(pending.is_some())

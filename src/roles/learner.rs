@@ -22,6 +22,7 @@ use shm_schemas::ObsShape;
 
 use super::{
     EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE,
+    config_exit,
 };
 use crate::latency::Latencies;
 use crate::world::WorldArgs;
@@ -79,9 +80,16 @@ pub struct LearnerReport {
 
 /// Runs the learner role until stopped; returns the process exit code.
 pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
-    let ctx = RunCtx::new(&a.run)?;
-    let (layout, cfg) = a.world.build()?;
-    let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+    // Everything a restart could not fix is checked first (EXIT_CONFIG).
+    let checked = (|| -> anyhow::Result<_> {
+        let (layout, cfg) = a.world.build()?;
+        let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+        Ok((RunCtx::new(&a.run, LEARNER_NODE)?, layout, cfg, shape))
+    })();
+    let (ctx, layout, cfg, shape) = match checked {
+        Ok(v) => v,
+        Err(e) => return Ok(config_exit("learner", &e)),
+    };
     let per_slice = shape.envs();
     let num_actions = cfg.task.num_actions();
     let opts = ShmEnvOptions {
@@ -89,6 +97,7 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         sim_node_name: SIM_NODE.into(),
         stop: Some(ctx.stop.clone()),
         connect_timeout: Duration::from_secs(3600),
+        task: Some(cfg.task.name().into()),
         ..ShmEnvOptions::default()
     };
     eprintln!(
@@ -103,7 +112,17 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         opts,
     ) {
         Ok(env) => env,
-        Err(EnvError::Interrupted) => return Ok(std::process::ExitCode::SUCCESS),
+        // Stopped (or out of time) while waiting: the last one out removes
+        // the run's shared memory.
+        Err(EnvError::Interrupted) => {
+            ctx.tidy();
+            return Ok(std::process::ExitCode::SUCCESS);
+        }
+        // Another shape, slicing, task or schema: a restart cannot fix it.
+        Err(EnvError::Shm(shm_schemas::ShmError::Schema(e))) => {
+            ctx.tidy();
+            return Ok(config_exit("learner", &anyhow::Error::new(e)));
+        }
         Err(e) => return Err(e.into()),
     };
     // One policy per slice: sample k holds slice k mod K, and each slice's

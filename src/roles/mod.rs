@@ -53,6 +53,50 @@ pub enum OnPeerDeath {
 
 /// Exit status of a role that stopped because a peer died (`--on-peer-death exit`).
 pub const EXIT_PEER_DIED: u8 = 3;
+/// Exit status of a role that refused its configuration (a bad layout,
+/// batch shape, node file, or a run whose role is already taken): `run`
+/// never restarts such a process, since the next start would fail the same way.
+pub const EXIT_CONFIG: u8 = 2;
+/// A run's shared memory older than this with no live process is swept at
+/// a role's start (younger files may belong to a run that is starting).
+pub const STALE_AFTER: Duration = Duration::from_secs(10);
+
+/// A configuration error: printed and turned into [`EXIT_CONFIG`] by the
+/// roles ([`config_exit`]), so `run` can tell it from a crash.
+pub fn config_exit(role: &str, e: &anyhow::Error) -> std::process::ExitCode {
+    eprintln!("{role}: configuration refused: {e:#}");
+    std::process::ExitCode::from(EXIT_CONFIG)
+}
+
+/// The live process, if any, that holds node `name` (e.g. the sim) of the
+/// run with `config`: `(pid, executable)`.
+pub fn node_holder(config: &Config, name: &str) -> Option<(i64, String)> {
+    list_nodes::<ipc::Service>(config)
+        .ok()?
+        .into_iter()
+        .find(|n| n.alive && n.name == name)
+        .map(|n| (n.pid, n.executable))
+}
+
+/// Sweeps the shared memory of dead runs of any name (`wg_*` with no live
+/// process, older than [`STALE_AFTER`]); says what it removed.
+pub fn sweep_stale_runs(who: &str) {
+    match shm_schemas::service::sweep_stale_prefixes::<ipc::Service>(
+        shm_schemas::service::PREFIX_ROOT,
+        STALE_AFTER,
+    ) {
+        Ok(swept) => {
+            for s in swept {
+                eprintln!(
+                    "{who}: removed {} stale shared-memory file(s) of dead run prefix {}",
+                    s.removed.len(),
+                    s.prefix
+                );
+            }
+        }
+        Err(e) => tracing::debug!("sweeping stale runs: {e}"),
+    }
+}
 
 /// The run a role belongs to.
 #[derive(Debug, Clone, Args)]
@@ -123,10 +167,21 @@ pub struct RunCtx {
 }
 
 impl RunCtx {
-    /// Resolves the run, creates its directory and installs the stop handlers.
-    pub fn new(a: &RunArgs) -> anyhow::Result<RunCtx> {
+    /// Resolves the run for the role whose node is `node_name`, refuses it
+    /// when a live process already holds that role of the run (naming it),
+    /// sweeps dead runs' shared memory, creates the run directory and
+    /// installs the stop handlers. `--duration` bounds the whole process,
+    /// waiting for peers included: a timer sets the stop flag.
+    pub fn new(a: &RunArgs, node_name: &str) -> anyhow::Result<RunCtx> {
         let run = RunName::new(&a.run)?;
         let config = run_config(&run)?;
+        if let Some((pid, exe)) = node_holder(&config, node_name) {
+            anyhow::bail!(
+                "run '{run}' already has a live {node_name} (process {pid}, {exe}); \
+                 stop it or choose another --run"
+            );
+        }
+        sweep_stale_runs(node_name);
         let dir = a
             .run_dir
             .clone()
@@ -147,6 +202,13 @@ impl RunCtx {
         let deadline = a
             .duration
             .map(|d| Instant::now() + Duration::from_secs_f64(d));
+        if let Some(d) = a.duration {
+            let stop = Arc::clone(&stop);
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_secs_f64(d));
+                stop.store(true, Ordering::Relaxed);
+            });
+        }
         if let Some(cpu) = a.cpu {
             pin_to_cpu(cpu)?;
         }

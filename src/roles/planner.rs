@@ -30,6 +30,7 @@ use sim::{Layout, Pose};
 
 use super::{
     EXIT_PEER_DIED, OnPeerDeath, PLANNER_NODE, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE,
+    config_exit,
 };
 use crate::latency::Latencies;
 use crate::world::WorldArgs;
@@ -176,11 +177,21 @@ fn status_of(e: &PlannerError) -> RouteStatus {
 
 /// Runs the planner role until stopped; returns the process exit code.
 pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
-    let ctx = RunCtx::new(&a.run)?;
-    let (layout, _) = a.world.build()?;
-    let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
-    let cfg = a.graph.config(&a.world);
-    cfg.validate()?;
+    // Everything a restart could not fix is checked first (EXIT_CONFIG).
+    let checked = (|| -> anyhow::Result<_> {
+        let (layout, _) = a.world.build()?;
+        let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+        let cfg = a.graph.config(&a.world);
+        cfg.validate()?;
+        if let Some(path) = &a.graph.node_file {
+            planner::pivotal::read_node_file(&layout, path)?;
+        }
+        Ok((RunCtx::new(&a.run, PLANNER_NODE)?, layout, shape, cfg))
+    })();
+    let (ctx, layout, shape, cfg) = match checked {
+        Ok(v) => v,
+        Err(e) => return Ok(config_exit("planner", &e)),
+    };
     let (graph, graph_loaded) = load_or_build(&ctx.dir, &layout, &cfg)?;
     let nodes: Vec<u32> = graph.nodes().iter().map(|c| c.0).collect();
     let edges: Vec<GraphEdge> = graph
@@ -193,14 +204,25 @@ pub fn serve(a: PlannerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         })
         .collect();
 
-    let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), PLANNER_NODE)?;
+    let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), PLANNER_NODE)?
+        .with_task(a.world.task.name(), a.world.task.num_actions());
     node.cleanup_dead_nodes();
     let attach = || {
         node.obs_subscriber(shape)
             .context("planner: cannot open the observation service")
     };
     // Attached at once, so a shape or schema mismatch stops the planner now.
-    let mut obs = Some(attach()?);
+    let mut obs = match node.obs_subscriber(shape) {
+        Ok(s) => Some(s),
+        Err(shm_schemas::ShmError::Schema(e)) => {
+            return Ok(config_exit("planner", &anyhow::Error::new(e)));
+        }
+        Err(e) => {
+            return Err(
+                anyhow::Error::new(e).context("planner: cannot open the observation service")
+            );
+        }
+    };
     let mut attached_at = Instant::now();
     let server = node
         .route_server()

@@ -27,7 +27,6 @@
 
 use std::io::Write;
 
-use anyhow::Context;
 use clap::Args;
 use iceoryx2::prelude::ipc;
 use serde::Serialize;
@@ -37,6 +36,7 @@ use sim::{BatchEnv, StepOut};
 
 use super::{
     EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PeerEvent, PeerWatch, RunArgs, RunCtx, SIM_NODE,
+    config_exit,
 };
 use crate::latency::{Latencies, Recorder};
 use crate::world::WorldArgs;
@@ -135,9 +135,16 @@ struct StatsLine {
 
 /// Runs the sim role until stopped; returns the process exit code.
 pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
-    let ctx = RunCtx::new(&a.run)?;
-    let (layout, cfg) = a.world.build()?;
-    let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+    // Everything a restart could not fix is checked first (EXIT_CONFIG).
+    let checked = (|| -> anyhow::Result<_> {
+        let (layout, cfg) = a.world.build()?;
+        let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
+        Ok((RunCtx::new(&a.run, SIM_NODE)?, layout, cfg, shape))
+    })();
+    let (ctx, layout, cfg, shape) = match checked {
+        Ok(v) => v,
+        Err(e) => return Ok(config_exit("sim", &e)),
+    };
     let per_slice = shape.envs();
     let mut slices = (0..a.slices)
         .map(|k| {
@@ -151,7 +158,8 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             )
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), SIM_NODE)?;
+    let node = PipelineNode::<ipc::Service>::new(&ctx.config, ctx.run.clone(), SIM_NODE)?
+        .with_task(cfg.task.name(), cfg.task.num_actions());
     let cleaned = node.cleanup_dead_nodes();
     if cleaned.cleanups > 0 {
         tracing::info!(
@@ -159,12 +167,19 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
             cleaned.cleanups
         );
     }
-    let publisher = node
+    let ports = node
         .obs_publisher(shape)
-        .context("sim: cannot open the observation service")?;
-    let actions = node
-        .act_subscriber(per_slice)
-        .context("sim: cannot open the action service")?;
+        .and_then(|p| node.act_subscriber(per_slice).map(|a| (p, a)));
+    let (publisher, actions) = match ports {
+        Ok(ports) => ports,
+        // Another shape, slicing, task or schema: a restart cannot fix it.
+        Err(shm_schemas::ShmError::Schema(e)) => {
+            return Ok(config_exit("sim", &anyhow::Error::new(e)));
+        }
+        Err(e) => {
+            return Err(anyhow::Error::new(e).context("sim: cannot open its services"));
+        }
+    };
     tracing::info!(
         "sim: run '{}', {} x {}x{} {} on '{}' in {} slice(s), publishing",
         ctx.run,

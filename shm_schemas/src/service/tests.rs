@@ -8,8 +8,16 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 
+use std::path::Path as StdPath;
+
+use iceoryx2::config::Config;
+
+use super::files::{files_with_prefix, is_iceoryx2_name_after_prefix};
 use super::*;
-use crate::{EnvMeta, GraphEdge, MAX_ROUTE_LEN, SchemaError, SeqEvent, SeqTracker};
+use crate::{
+    Channel, EnvMeta, GraphEdge, MAX_ROUTE_LEN, ObsShape, RouteStatus, SCHEMA_VERSION, SchemaError,
+    SeqEvent, SeqTracker, ShmError,
+};
 
 /// Environment variable selecting a child role in [`child_process_entry`].
 const CHILD_ROLE: &str = "WG_SHM_TEST_CHILD";
