@@ -44,6 +44,7 @@ fn train(a: &DemoArgs, agent: AgentArg, graph: &Path, name: &str) -> anyhow::Res
         config: None,
         env_steps: Some(a.env_steps),
         run: Some(run.clone()),
+        pipeline: false,
         json: false,
     })?;
     Ok(serde_json::from_slice(&std::fs::read(

@@ -105,6 +105,10 @@ pub struct TrainArgs {
     /// Run directory [default: runs/train-<maze>-<task>-<agent>-<seed>].
     #[arg(long)]
     pub run: Option<PathBuf>,
+    /// Step the training environments in a sim process over shared memory
+    /// (one per segment); same result as in-process for the same seed.
+    #[arg(long)]
+    pub pipeline: bool,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -389,6 +393,61 @@ pub fn eval_env(
     Ok(InProcess::from_batch(batch))
 }
 
+/// A sim process stepping `envs` environments seeded by `seed`, and the
+/// shared-memory client of its batch.
+fn pipeline_env(
+    a: &TrainArgs,
+    layout: &Layout,
+    env_cfg: EnvConfig,
+    envs: usize,
+    seed: u64,
+    dir: &Path,
+) -> anyhow::Result<(Box<dyn BatchEnvironment>, (crate::pipeline::Pipeline, String))> {
+    use crate::pipeline::{Pipeline, Role, world_words};
+    let run_name = format!("train-{}", std::process::id());
+    let w = crate::world::WorldArgs {
+        maze: a.maze,
+        layout: None,
+        task: a.task,
+        seed,
+        max_steps: None,
+        balls: None,
+    };
+    let mut words = vec!["sim".to_string(), "serve".into()];
+    words.extend(world_words(&w));
+    words.extend([
+        "--run".into(),
+        run_name.clone(),
+        "--run-dir".into(),
+        dir.display().to_string(),
+        "--envs".into(),
+        envs.to_string(),
+        "--slices".into(),
+        "1".into(),
+        "--on-peer-death".into(),
+        "exit".into(),
+    ]);
+    let mut p = Pipeline::new(vec![(Role::Sim, words)], Some(dir))?;
+    p.spawn(Role::Sim)?;
+    let run = shm_schemas::service::RunName::new(&run_name)?;
+    let shape = shm_schemas::ObsShape::new(envs, layout.width, layout.height)?;
+    let opts = learner::shm_env::ShmEnvOptions {
+        node_name: crate::roles::LEARNER_NODE.into(),
+        sim_node_name: crate::roles::SIM_NODE.into(),
+        connect_timeout: std::time::Duration::from_secs(60),
+        task: Some(env_cfg.task.name().into()),
+        ..learner::shm_env::ShmEnvOptions::default()
+    };
+    let env = learner::shm_env::ShmEnv::<iceoryx2::prelude::ipc::Service>::connect(
+        &shm_schemas::service::run_config(&run)?,
+        run,
+        shape,
+        env_cfg.task.num_actions(),
+        opts,
+    )?;
+    Ok((Box::new(env), (p, run_name)))
+}
+
 fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
     a.run.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!(
@@ -596,17 +655,19 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         // A segment is a function of the checkpoint: fresh environments
         // seeded by (seed, segment), so a resumed run repeats the
         // uninterrupted one.
-        let mut env = InProcess::new(
-            layout.clone(),
-            env_cfg,
-            cfg.agent.envs,
-            sim::env_seed(a.seed, state.segments_done),
-            1,
-        )?;
-        agent.start_segment(&mut env, state.segments_done)?;
+        let seg_seed = sim::env_seed(a.seed, state.segments_done);
+        let (mut env, pipeline) = if a.pipeline {
+            let (env, p) = pipeline_env(&a, &layout, env_cfg, cfg.agent.envs, seg_seed, &dir)?;
+            (env, Some(p))
+        } else {
+            let env: Box<dyn BatchEnvironment> =
+                Box::new(InProcess::new(layout.clone(), env_cfg, cfg.agent.envs, seg_seed, 1)?);
+            (env, None)
+        };
+        agent.start_segment(env.as_mut(), state.segments_done)?;
         let mut stats = Vec::with_capacity(iters_per_segment as usize);
         for _ in 0..iters_per_segment {
-            let s = agent.train_iteration(&mut env)?;
+            let s = agent.train_iteration(env.as_mut())?;
             bar.inc(1);
             bar.set_message(format!(
                 "return {:.2}  validation {}",
@@ -617,6 +678,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                     .map_or("-".to_string(), |r| format!("{:.2}", r.validation_score))
             ));
             stats.push(s);
+        }
+        drop(env);
+        if let Some((mut p, run_name)) = pipeline {
+            p.stop_all(std::time::Duration::from_secs(3));
+            super::run::teardown(&run_name)?;
         }
         // The same validation episodes every time: fresh environments of
         // the validation seeds.
