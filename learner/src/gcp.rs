@@ -5,8 +5,8 @@
 //! - **Goals.** "We train such an A2C-based goal-conditioned policy by
 //!   sampling goals using the end points of random walks with reasonable
 //!   length from a given starting state": every environment holds a goal
-//!   cell, the end of a random walk of [`GcpConfig::goal_walk_len`] moves
-//!   from the agent's current pose ([`GoalSampler`]). A *goal episode* ends
+//!   cell [`GcpConfig::goal_walk_len`] / 2 to [`GcpConfig::goal_walk_len`]
+//!   moves from the agent's current cell by path distance ([`GoalSampler`]). A *goal episode* ends
 //!   when the agent stands on the goal (reward [`GcpConfig::goal_reward`],
 //!   a success), at the time limit [`GcpConfig::goal_time_limit`] (a
 //!   failure) or when the environment's own episode ends; the next goal is
@@ -38,7 +38,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use shm_schemas::{EnvMeta, flags};
-use sim::{AutoReset, BallSpawn, Env, EnvConfig, Layout, Object, Pose, Task};
+use sim::{Layout, Object, Pose};
 use tch::nn::{self, OptimizerConfig};
 use tch::{Device, Kind, Tensor};
 
@@ -249,75 +249,100 @@ pub struct GcpStats {
     pub mean_curiosity: f64,
 }
 
-/// Draws goals as the end cells of random walks (section 3.2), simulated on
-/// a private environment built from the layout.
+/// Draws goals (section 3.2: "sampling goals using the end points of random
+/// walks with reasonable length from a given starting state") by **path
+/// distance**: a goal for a walk length `n` is a cell drawn uniformly among
+/// those whose shortest path from the agent's cell takes between `⌈n/2⌉`
+/// and `n` moves, so every goal is a real journey of about `n` moves.
+/// (The ends of `n` random turn-or-forward actions lie mostly one to three
+/// moves away, so `π_g`'s episodes were too short to need any state
+/// between their ends.)
 ///
-/// The walk moves with the navigation actions only (turn left, turn right,
-/// forward), on the layout's geometry: balls and keys are lifted and doors
-/// opened, since the walk explores where the agent can go, not what it may
-/// carry. A walk that would end the episode (exit, lava) or that ends on
-/// its own start cell is redrawn.
+/// Distances are taken on the layout's geometry: balls and keys count as
+/// lifted and doors as open, since goals explore where the agent can go,
+/// not what it may carry; cells that end the episode (exit, lava) are
+/// never goals and never passed through.
 #[derive(Debug)]
 pub struct GoalSampler {
-    walker: Env,
+    width: usize,
+    /// Cells a goal may lie on or a path may pass through.
+    open: Vec<bool>,
     rng: SmallRng,
+    /// Breadth-first search scratch: distances from the last start.
+    distance: Vec<u32>,
+    queue: std::collections::VecDeque<usize>,
 }
 
 impl GoalSampler {
-    /// Redraws before a walk that keeps returning to its start is accepted
-    /// as it is (only in a layout where the agent cannot move).
-    const MAX_DRAWS: usize = 64;
-    /// The actions a walk draws from.
-    const MOVES: [u8; 3] = [sim::action::LEFT, sim::action::RIGHT, sim::action::FORWARD];
-
     /// A sampler over `layout`'s geometry with its own RNG.
     pub fn new(layout: &Layout, seed: u64) -> GoalSampler {
-        let mut geometry = layout.clone();
-        for cell in &mut geometry.cells {
-            *cell = match Object::from_code(*cell) {
-                Some(Object::Ball | Object::Key) => Object::Floor as u8,
-                Some(Object::DoorClosed | Object::DoorLocked) => Object::DoorOpen as u8,
-                _ => *cell,
-            };
-        }
-        let cfg = EnvConfig {
-            task: Task::MultiGoal,
-            max_steps: u32::MAX,
-            balls: BallSpawn::Layout,
-            auto_reset: AutoReset::Off,
-        };
+        let open = layout
+            .cells
+            .iter()
+            .map(|&c| {
+                !matches!(
+                    Object::from_code(c),
+                    Some(Object::Wall | Object::Exit | Object::Lava) | None
+                )
+            })
+            .collect();
         GoalSampler {
-            walker: Env::new(geometry, cfg, seed, 0),
+            width: layout.width,
+            open,
             rng: SmallRng::seed_from_u64(seed),
+            distance: vec![u32::MAX; layout.cells.len()],
+            queue: std::collections::VecDeque::new(),
         }
     }
 
-    /// The end cell of a random walk of `walk_len` moves from `from`, never
-    /// `from`'s own cell (unless no walk leaves it).
+    /// A goal cell `⌈walk_len/2⌉` to `walk_len` moves from `from` (the
+    /// farthest reachable cells when nothing is that far), never `from`'s
+    /// own cell unless the agent cannot move.
     pub fn draw(&mut self, from: Pose, walk_len: usize) -> u32 {
-        let width = self.walker.layout().width;
-        let start = from.y as usize * width + from.x as usize;
-        let mut end = start;
-        for _ in 0..Self::MAX_DRAWS {
-            // A fresh copy per walk: nothing of an earlier walk carries over.
-            let mut walk = self.walker.clone();
-            walk.teleport(from);
-            let mut ended = false;
-            for _ in 0..walk_len {
-                let action = Self::MOVES[self.rng.random_range(0..Self::MOVES.len())];
-                if walk.step_meta(action).done() {
-                    ended = true;
-                    break;
-                }
+        let (w, n) = (self.width, self.open.len());
+        let start = from.y as usize * w + from.x as usize;
+        self.distance.fill(u32::MAX);
+        self.distance[start] = 0;
+        self.queue.clear();
+        self.queue.push_back(start);
+        let far = walk_len.max(1) as u32;
+        while let Some(i) = self.queue.pop_front() {
+            let d = self.distance[i];
+            if d == far {
+                continue;
             }
-            if !ended {
-                end = walk.cell();
-                if end != start {
-                    break;
+            let (x, y) = (i % w, i / w);
+            let next = [
+                (x + 1 < w).then(|| i + 1),
+                (x > 0).then(|| i - 1),
+                (i + w < n).then(|| i + w),
+                (y > 0).then(|| i - w),
+            ];
+            for j in next.into_iter().flatten() {
+                if self.open[j] && self.distance[j] == u32::MAX {
+                    self.distance[j] = d + 1;
+                    self.queue.push_back(j);
                 }
             }
         }
-        end as u32
+        let reached = self
+            .distance
+            .iter()
+            .filter(|&&d| d != u32::MAX)
+            .max()
+            .copied()
+            .unwrap_or(0);
+        let near = far.div_ceil(2).min(reached);
+        let candidates: Vec<usize> = (0..n)
+            .filter(|&i| {
+                let d = self.distance[i];
+                d != u32::MAX && d >= near.max(1) && d <= far
+            })
+            .collect();
+        if candidates.is_empty() {
+            return start as u32;
+        }
+        candidates[self.rng.random_range(0..candidates.len())] as u32
     }
 }
 
@@ -328,8 +353,10 @@ struct GoalEpisode {
     goal: u32,
     /// Steps taken towards it.
     steps: u32,
-    /// `(s_t, a_t)` since the goal was drawn; `states` ends with the pose the
-    /// agent stands on now.
+    /// Goals reached before this one within `trajectory`.
+    legs: usize,
+    /// `(s_t, a_t)` since the chain's first goal was drawn; `states` ends
+    /// with the pose the agent stands on now.
     trajectory: Trajectory,
 }
 
@@ -349,6 +376,15 @@ struct GoalStep {
 }
 
 /// The goal episodes of a batch of environments.
+///
+/// When recording, the goal episodes of one environment are **chained**:
+/// a reached goal is followed by the next from where the agent stands,
+/// and the trajectory goes on until [`GoalBook::LEGS`] goals were reached
+/// or one was missed. A trajectory then crosses rooms, and the states
+/// between its ends (the doorways it passes, where one leg turns into the
+/// next) carry the information the latent model is meant to find; a
+/// single leg's actions follow from its two ends alone. The A2C episodes
+/// (rewards, done flags, LSTM resets) are the single goals either way.
 #[derive(Debug)]
 struct GoalBook {
     walk_len: usize,
@@ -367,20 +403,16 @@ fn pose_of(meta: &EnvMeta) -> Pose {
     }
 }
 
+/// The pose of an observation record, as every trajectory source encodes
+/// it ([`AgentPose::from_meta`]).
 fn agent_pose(meta: &EnvMeta, width: usize) -> AgentPose {
-    let carried = if meta.carrying == EnvMeta::CARRYING_NOTHING {
-        0
-    } else {
-        meta.carrying
-    };
-    AgentPose {
-        cell: (meta.y as usize * width + meta.x as usize) as u32,
-        direction: meta.dir,
-        carried,
-    }
+    AgentPose::from_meta(meta, width)
 }
 
 impl GoalBook {
+    /// Goals chained into one recorded trajectory.
+    const LEGS: usize = 3;
+
     fn new(walk_len: usize, time_limit: u32, record: bool) -> GoalBook {
         GoalBook {
             walk_len,
@@ -400,6 +432,7 @@ impl GoalBook {
         GoalEpisode {
             goal: sampler.draw(pose_of(meta), self.walk_len),
             steps: 0,
+            legs: 0,
             trajectory: Trajectory {
                 states: vec![agent_pose(meta, width)],
                 actions: Vec::new(),
@@ -471,9 +504,18 @@ impl GoalBook {
                 steps: episode.steps,
             });
             if goal_done {
-                let next = self.fresh_episode(sampler, meta, width);
+                let legs = episode.legs + 1;
+                let chained = self.record && success && legs < Self::LEGS;
+                // The chain goes on: the next goal's steps extend this
+                // trajectory.
+                let kept = chained.then(|| std::mem::take(&mut episode.trajectory));
+                let mut next = self.fresh_episode(sampler, meta, width);
+                if let Some(trajectory) = kept {
+                    next.legs = legs;
+                    next.trajectory = trajectory;
+                }
                 let done = std::mem::replace(&mut self.episodes[i], next);
-                if self.record && !done.trajectory.actions.is_empty() {
+                if self.record && !chained && !done.trajectory.actions.is_empty() {
                     self.finished.push(done.trajectory);
                 }
             }
@@ -957,6 +999,7 @@ fn curiosity_bonus(
 mod tests {
     use super::*;
     use crate::batch_env::InProcess;
+    use sim::{BallSpawn, EnvConfig, Task};
 
     const ROOM: &str = "#######\n#.....#\n#.....#\n#..>..#\n#.....#\n#....E#\n#######\n";
 
