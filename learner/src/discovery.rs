@@ -103,13 +103,7 @@ impl Default for DiscoveryConfig {
             gcp_iters_per_round: 100,
             pivotal_ratio: 0.2,
             latent: LatentConfig::default(),
-            // Goals 4 to 8 moves away by path distance: chained three at
-            // a time (`GoalSampler`, `GoalBook`), a recorded trajectory
-            // crosses rooms.
-            gcp: GcpConfig {
-                goal_walk_len: 8,
-                ..GcpConfig::default()
-            },
+            gcp: GcpConfig::default(),
         }
     }
 }
@@ -756,7 +750,7 @@ const EVAL_PER_SOURCE: usize = 128;
 fn hold_out(all: Vec<Trajectory>, n: usize) -> (Vec<Trajectory>, Vec<Trajectory>) {
     // Hold out at most a quarter, so a short round still trains.
     let n = n.min(all.len() / 4);
-    let k = if n == 0 { usize::MAX } else { all.len() / n };
+    let k = all.len().checked_div(n).unwrap_or(usize::MAX);
     let (mut held, mut rest) = (Vec::new(), Vec::new());
     for (i, t) in all.into_iter().enumerate() {
         if held.len() < n && i % k == 0 {
@@ -790,7 +784,7 @@ fn mixed_batch(
             let from = match (walks.is_empty(), goals.is_empty()) {
                 (false, true) => walks,
                 (true, false) => goals,
-                _ if k % 2 == 0 => walks,
+                _ if k.is_multiple_of(2) => walks,
                 _ => goals,
             };
             from[rng.random_range(0..from.len())].clone()

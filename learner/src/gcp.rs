@@ -5,8 +5,8 @@
 //! - **Goals.** "We train such an A2C-based goal-conditioned policy by
 //!   sampling goals using the end points of random walks with reasonable
 //!   length from a given starting state": every environment holds a goal
-//!   cell [`GcpConfig::goal_walk_len`] / 2 to [`GcpConfig::goal_walk_len`]
-//!   moves from the agent's current cell by path distance ([`GoalSampler`]). A *goal episode* ends
+//!   cell 1 to [`GcpConfig::goal_walk_len`] moves from the agent's current
+//!   cell by path distance ([`GoalSampler`]). A *goal episode* ends
 //!   when the agent stands on the goal (reward [`GcpConfig::goal_reward`],
 //!   a success), at the time limit [`GcpConfig::goal_time_limit`] (a
 //!   failure) or when the environment's own episode ends; the next goal is
@@ -252,11 +252,11 @@ pub struct GcpStats {
 /// Draws goals (section 3.2: "sampling goals using the end points of random
 /// walks with reasonable length from a given starting state") by **path
 /// distance**: a goal for a walk length `n` is a cell drawn uniformly among
-/// those whose shortest path from the agent's cell takes between `⌈n/2⌉`
-/// and `n` moves, so every goal is a real journey of about `n` moves.
-/// (The ends of `n` random turn-or-forward actions lie mostly one to three
-/// moves away, so `π_g`'s episodes were too short to need any state
-/// between their ends.)
+/// those whose shortest path from the agent's cell takes 1 to `n` moves
+/// (most of them are `n/2` or more away, as there are more cells there).
+/// The ends of `n` random turn-or-forward actions lay mostly one to three
+/// moves away, so `π_g`'s episodes were too short to need any state between
+/// their ends; [`GoalBook`] chains them besides.
 ///
 /// Distances are taken on the layout's geometry: balls and keys count as
 /// lifted and doors as open, since goals explore where the agent can go,
@@ -295,9 +295,8 @@ impl GoalSampler {
         }
     }
 
-    /// A goal cell `⌈walk_len/2⌉` to `walk_len` moves from `from` (the
-    /// farthest reachable cells when nothing is that far), never `from`'s
-    /// own cell unless the agent cannot move.
+    /// A goal cell 1 to `walk_len` moves from `from`, never `from`'s own
+    /// cell unless the agent cannot move.
     pub fn draw(&mut self, from: Pose, walk_len: usize) -> u32 {
         let (w, n) = (self.width, self.open.len());
         let start = from.y as usize * w + from.x as usize;
@@ -325,19 +324,8 @@ impl GoalSampler {
                 }
             }
         }
-        let reached = self
-            .distance
-            .iter()
-            .filter(|&&d| d != u32::MAX)
-            .max()
-            .copied()
-            .unwrap_or(0);
-        let near = far.div_ceil(2).min(reached);
         let candidates: Vec<usize> = (0..n)
-            .filter(|&i| {
-                let d = self.distance[i];
-                d != u32::MAX && d >= near.max(1) && d <= far
-            })
+            .filter(|&i| self.distance[i] != u32::MAX && self.distance[i] >= 1)
             .collect();
         if candidates.is_empty() {
             return start as u32;

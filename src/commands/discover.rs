@@ -400,7 +400,8 @@ fn build_graph_in_planner(
     })
 }
 
-/// The maze shaded by prior mean, with `V_p` and the graph's edges.
+/// The maze shaded by prior mean, with `V_p` and the graph's edges (along
+/// their paths).
 fn render_pivotal(
     layout: &Layout,
     prior: &[f32],
@@ -442,9 +443,15 @@ fn render_pivotal(
         let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
         ((x as f32 + 0.5) * px as f32, (y as f32 + 0.5) * px as f32)
     };
+    // Each edge along its path, through the cells it visits.
     for e in graph.edges() {
-        let (a, b) = (graph.nodes()[e.from.index()], graph.nodes()[e.to.index()]);
-        c.line(centre(a.0), centre(b.0), 2.0, [30, 30, 30], 0.55);
+        let mut at = graph.nodes()[e.from.index()].0;
+        for cell in &e.cells {
+            if cell.0 != at {
+                c.line(centre(at), centre(cell.0), 2.0, [30, 30, 30], 0.4);
+                at = cell.0;
+            }
+        }
     }
     for &p in pivotal {
         let (x, y) = centre(p);
