@@ -6,7 +6,8 @@
 //!   sampling goals using the end points of random walks with reasonable
 //!   length from a given starting state": every environment holds a goal
 //!   cell 1 to [`GcpConfig::goal_walk_len`] moves from the agent's current
-//!   cell by path distance ([`GoalSampler`]). A *goal episode* ends
+//!   cell by path distance in training, the end of a random walk of that
+//!   many moves in evaluation ([`GoalSampler`]). A *goal episode* ends
 //!   when the agent stands on the goal (reward [`GcpConfig::goal_reward`],
 //!   a success), at the time limit [`GcpConfig::goal_time_limit`] (a
 //!   failure) or when the environment's own episode ends; the next goal is
@@ -38,7 +39,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use shm_schemas::{EnvMeta, flags};
-use sim::{Layout, Object, Pose};
+use sim::{AutoReset, BallSpawn, Env, EnvConfig, Layout, Object, Pose, Task};
 use tch::nn::{self, OptimizerConfig};
 use tch::{Device, Kind, Tensor};
 
@@ -250,20 +251,25 @@ pub struct GcpStats {
 }
 
 /// Draws goals (section 3.2: "sampling goals using the end points of random
-/// walks with reasonable length from a given starting state") by **path
-/// distance**: a goal for a walk length `n` is a cell drawn uniformly among
-/// those whose shortest path from the agent's cell takes 1 to `n` moves
-/// (most of them are `n/2` or more away, as there are more cells there).
-/// The ends of `n` random turn-or-forward actions lay mostly one to three
-/// moves away, so `π_g`'s episodes were too short to need any state between
-/// their ends; [`GoalBook`] chains them besides.
+/// walks with reasonable length from a given starting state"), two ways:
 ///
-/// Distances are taken on the layout's geometry: balls and keys count as
-/// lifted and doors as open, since goals explore where the agent can go,
-/// not what it may carry; cells that end the episode (exit, lava) are
-/// never goals and never passed through.
+/// - [`GoalSampler::draw`]: the end cell of a random walk of `n` turn-or-
+///   forward actions (mostly one to three moves away). Evaluation draws
+///   these, so its figures stay comparable.
+/// - [`GoalSampler::draw_by_distance`]: a cell drawn uniformly among those
+///   whose shortest path from the agent's cell takes 1 to `n` moves (most
+///   of them `n/2` or more away, as there are more cells there). Training
+///   draws these: the walk ends were too near for `π_g`'s episodes to need
+///   any state between their ends, and [`GoalBook`] chains them besides.
+///
+/// Both work on the layout's geometry: balls and keys count as lifted and
+/// doors as open, since goals explore where the agent can go, not what it
+/// may carry. A walk that would end the episode (exit, lava) or ends on its
+/// own start cell is redrawn; path distances never pass through or end on
+/// such cells.
 #[derive(Debug)]
 pub struct GoalSampler {
+    walker: Env,
     width: usize,
     /// Cells a goal may lie on or a path may pass through.
     open: Vec<bool>,
@@ -274,9 +280,23 @@ pub struct GoalSampler {
 }
 
 impl GoalSampler {
+    /// Redraws before a walk that keeps returning to its start is accepted
+    /// as it is (only in a layout where the agent cannot move).
+    const MAX_DRAWS: usize = 64;
+    /// The actions a walk draws from.
+    const MOVES: [u8; 3] = [sim::action::LEFT, sim::action::RIGHT, sim::action::FORWARD];
+
     /// A sampler over `layout`'s geometry with its own RNG.
     pub fn new(layout: &Layout, seed: u64) -> GoalSampler {
-        let open = layout
+        let mut geometry = layout.clone();
+        for cell in &mut geometry.cells {
+            *cell = match Object::from_code(*cell) {
+                Some(Object::Ball | Object::Key) => Object::Floor as u8,
+                Some(Object::DoorClosed | Object::DoorLocked) => Object::DoorOpen as u8,
+                _ => *cell,
+            };
+        }
+        let open = geometry
             .cells
             .iter()
             .map(|&c| {
@@ -286,7 +306,14 @@ impl GoalSampler {
                 )
             })
             .collect();
+        let cfg = EnvConfig {
+            task: Task::MultiGoal,
+            max_steps: u32::MAX,
+            balls: BallSpawn::Layout,
+            auto_reset: AutoReset::Off,
+        };
         GoalSampler {
+            walker: Env::new(geometry, cfg, seed, 0),
             width: layout.width,
             open,
             rng: SmallRng::seed_from_u64(seed),
@@ -295,9 +322,36 @@ impl GoalSampler {
         }
     }
 
-    /// A goal cell 1 to `walk_len` moves from `from`, never `from`'s own
-    /// cell unless the agent cannot move.
+    /// The end cell of a random walk of `walk_len` moves from `from`, never
+    /// `from`'s own cell (unless no walk leaves it).
     pub fn draw(&mut self, from: Pose, walk_len: usize) -> u32 {
+        let start = from.y as usize * self.width + from.x as usize;
+        let mut end = start;
+        for _ in 0..Self::MAX_DRAWS {
+            // A fresh copy per walk: nothing of an earlier walk carries over.
+            let mut walk = self.walker.clone();
+            walk.teleport(from);
+            let mut ended = false;
+            for _ in 0..walk_len {
+                let action = Self::MOVES[self.rng.random_range(0..Self::MOVES.len())];
+                if walk.step_meta(action).done() {
+                    ended = true;
+                    break;
+                }
+            }
+            if !ended {
+                end = walk.cell();
+                if end != start {
+                    break;
+                }
+            }
+        }
+        end as u32
+    }
+
+    /// A goal cell 1 to `walk_len` moves from `from` by path distance,
+    /// never `from`'s own cell unless the agent cannot move.
+    pub fn draw_by_distance(&mut self, from: Pose, walk_len: usize) -> u32 {
         let (w, n) = (self.width, self.open.len());
         let start = from.y as usize * w + from.x as usize;
         self.distance.fill(u32::MAX);
@@ -417,8 +471,15 @@ impl GoalBook {
         meta: &EnvMeta,
         width: usize,
     ) -> GoalEpisode {
+        // Training (recording) goals by path distance, evaluation goals
+        // as random-walk ends ([`GoalSampler`]).
+        let goal = if self.record {
+            sampler.draw_by_distance(pose_of(meta), self.walk_len)
+        } else {
+            sampler.draw(pose_of(meta), self.walk_len)
+        };
         GoalEpisode {
-            goal: sampler.draw(pose_of(meta), self.walk_len),
+            goal,
             steps: 0,
             legs: 0,
             trajectory: Trajectory {
@@ -987,7 +1048,6 @@ fn curiosity_bonus(
 mod tests {
     use super::*;
     use crate::batch_env::InProcess;
-    use sim::{BallSpawn, EnvConfig, Task};
 
     const ROOM: &str = "#######\n#.....#\n#.....#\n#..>..#\n#.....#\n#....E#\n#######\n";
 
@@ -1037,9 +1097,14 @@ mod tests {
         let layout = room();
         let mut sampler = GoalSampler::new(&layout, 9);
         let from = Pose { x: 1, y: 1, dir: 0 };
-        for walk_len in 1..=6 {
+        for (walk_len, by_distance) in (1..=6).flat_map(|n| [(n, false), (n, true)]) {
+            let mut farthest = 0;
             for _ in 0..200 {
-                let goal = sampler.draw(from, walk_len) as usize;
+                let goal = if by_distance {
+                    sampler.draw_by_distance(from, walk_len) as usize
+                } else {
+                    sampler.draw(from, walk_len) as usize
+                };
                 let (x, y) = (goal % layout.width, goal / layout.width);
                 assert_ne!((x, y), (1, 1), "a goal is never the agent's own cell");
                 assert_ne!(layout.cells[goal], Object::Wall as u8);
@@ -1048,11 +1113,17 @@ mod tests {
                     Object::Exit as u8,
                     "walks that end the episode are redrawn"
                 );
-                // At most one cell per forward move.
+                // At most one cell per forward move (in this open room the
+                // path distance is the Manhattan distance).
                 assert!(
                     x - 1 + y - 1 <= walk_len,
                     "walk of {walk_len} reached ({x}, {y})"
                 );
+                farthest = farthest.max(x - 1 + y - 1);
+            }
+            if by_distance {
+                // The room's far corner is 8 moves away: goals reach `walk_len`.
+                assert_eq!(farthest, walk_len, "by distance, walk of {walk_len}");
             }
         }
         // Same seed, same goals.

@@ -190,7 +190,7 @@ impl World {
                 y: (at.cell as usize / w) as u16,
                 dir: at.direction,
             };
-            let goal = sampler.draw(from, goal_len);
+            let goal = sampler.draw_by_distance(from, goal_len);
             self.reach(&mut tau, goal, rng);
         }
         tau
