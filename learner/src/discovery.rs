@@ -7,7 +7,8 @@
 //!    replaying the action path it recorded the first time it got there
 //!    (paper section 3.2, "the agent records the paths it took"); and
 //!    rollouts of the goal-conditioned policy `π_g`;
-//! 2. *trains the latent model* (section 3.1) on the collected trajectories;
+//! 2. *trains the latent model* (section 3.1) on the collected trajectories,
+//!    both sources alike (see [`DiscoveryConfig::buffer`]);
 //! 3. *updates the pivotal states* `V_p`: the top `pivotal_ratio` of the
 //!    visited cells by prior mean;
 //! 4. *trains `π_g`* with the curiosity bonus (section 3.2).
@@ -31,7 +32,7 @@ use std::path::Path;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
-use sim::{Layout, Object, action, flags};
+use sim::{Layout, action, flags};
 
 use crate::batch_env::{BatchEnvironment, EnvError};
 use crate::checkpoint;
@@ -66,7 +67,12 @@ pub struct DiscoveryConfig {
     pub latent_steps_per_round: u32,
     /// Trajectories per latent-model update.
     pub latent_batch: usize,
-    /// Most trajectories kept for training (the newest).
+    /// Most trajectories kept for training (the newest), split evenly
+    /// between the two sources: walks (random walks and path replays) and
+    /// `π_g`'s goal trajectories. Every batch draws from both halves alike
+    /// (all from one while the other is empty), so neither source crowds
+    /// the other out: once `π_g` succeeds it yields far more trajectories
+    /// than the walks, and one first-in-first-out buffer forgot the walks.
     pub buffer: usize,
     /// `π_g` A2C iterations per round (0: random walks only).
     pub gcp_iters_per_round: u32,
@@ -142,7 +148,9 @@ pub struct RoundStats {
     pub env_steps: u64,
     /// Trajectories collected in the round (walks and `π_g` goal episodes).
     pub trajectories: usize,
-    /// Reconstruction accuracy of the latent model on this round's trajectories.
+    /// Reconstruction accuracy of the latent model on trajectories of this
+    /// round held out of its training, drawn from both sources as the
+    /// training batches are.
     pub reconstruction_accuracy: f64,
     /// Mean KL of the last update.
     pub kl: f64,
@@ -177,7 +185,11 @@ struct State {
     pivotal: Vec<u32>,
     best_accuracy: f64,
     rounds_without_improvement: u32,
+    /// The walks' half of the training buffer.
     buffer: Vec<SavedTrajectory>,
+    /// `π_g`'s half of the training buffer.
+    #[serde(default)]
+    gcp_buffer: Vec<SavedTrajectory>,
     /// The latent model's Lagrange multipliers (eq. 3), which live outside
     /// its weights; `None` only in checkpoints written before they were kept.
     #[serde(default)]
@@ -190,7 +202,10 @@ pub struct Discovery {
     state: State,
     latent: LatentTrainer,
     gcp: GoalConditionedPolicy,
+    /// Training trajectories of the walks (random walks, path replays).
     buffer: Vec<Trajectory>,
+    /// Training trajectories of `π_g` (chained goal episodes).
+    gcp_buffer: Vec<Trajectory>,
 }
 
 impl std::fmt::Debug for Discovery {
@@ -201,39 +216,10 @@ impl std::fmt::Debug for Discovery {
     }
 }
 
-/// The pose the latent model reads from an observation record.
+/// The pose the latent model reads from an observation record (the one
+/// constructor every trajectory source uses, [`AgentPose::from_meta`]).
 pub fn pose_of(m: &sim::EnvMeta, width: usize) -> AgentPose {
-    let carried = if m.carrying == sim::EnvMeta::CARRYING_NOTHING {
-        0
-    } else {
-        m.carrying + 1
-    };
-    AgentPose {
-        cell: m.y as u32 * width as u32 + m.x as u32,
-        direction: m.dir & 3,
-        carried,
-    }
-}
-
-/// Doorway cells of a layout: passable cells with walls on two opposite
-/// sides and passable cells on the other two (the one-cell gaps between
-/// rooms that pivotal states should find).
-pub fn doorway_cells(layout: &Layout) -> Vec<u32> {
-    let wall = |x: usize, y: usize| layout.object(x, y) == Object::Wall;
-    let mut out = Vec::new();
-    for y in 1..layout.height - 1 {
-        for x in 1..layout.width - 1 {
-            if wall(x, y) {
-                continue;
-            }
-            let horizontal = wall(x - 1, y) && wall(x + 1, y) && !wall(x, y - 1) && !wall(x, y + 1);
-            let vertical = wall(x, y - 1) && wall(x, y + 1) && !wall(x - 1, y) && !wall(x + 1, y);
-            if horizontal || vertical {
-                out.push(layout.cell_index(x, y) as u32);
-            }
-        }
-    }
-    out
+    AgentPose::from_meta(m, width)
 }
 
 enum Phase {
@@ -339,6 +325,7 @@ impl Discovery {
             best_accuracy: 0.0,
             rounds_without_improvement: 0,
             buffer: Vec::new(),
+            gcp_buffer: Vec::new(),
             multipliers: None,
         };
         Ok(Discovery {
@@ -347,6 +334,7 @@ impl Discovery {
             latent,
             gcp,
             buffer: Vec::new(),
+            gcp_buffer: Vec::new(),
         })
     }
 
@@ -558,45 +546,47 @@ impl Discovery {
             .map_err(LearnerError::from)?;
 
         // 1. Trajectories: random walks, then π_g rollouts.
-        let (mut fresh, mut env_steps) = self.collect_walks(env, &mut rng)?;
+        let (walks, mut env_steps) = self.collect_walks(env, &mut rng)?;
         let mut gcp_stats: Vec<GcpStats> = Vec::new();
         for _ in 0..cfg.gcp_iters_per_round {
             let curiosity = (round > 0).then(|| self.latent.model());
             gcp_stats.push(self.gcp.train_iteration(env, curiosity)?);
             env_steps += (cfg.gcp.rollout_len * n) as u64;
         }
-        let gcp_trajectories = self.gcp.take_trajectories();
-        for t in &gcp_trajectories {
+        let goal_trajectories: Vec<Trajectory> = self
+            .gcp
+            .take_trajectories()
+            .into_iter()
+            .filter(|t| !t.actions.is_empty())
+            .collect();
+        for t in &goal_trajectories {
             for s in &t.states {
                 *self.state.visits.entry(s.cell).or_default() += 1;
             }
         }
-        fresh.extend(
-            gcp_trajectories
-                .into_iter()
-                .filter(|t| !t.actions.is_empty()),
-        );
-        let collected = fresh.len();
+        let collected = walks.len() + goal_trajectories.len();
 
-        // 2. The latent model, on the newest `buffer` trajectories.
-        self.buffer.extend(fresh.iter().cloned());
-        if self.buffer.len() > cfg.buffer {
-            let excess = self.buffer.len() - cfg.buffer;
-            self.buffer.drain(..excess);
-        }
+        // 2. The latent model, on the newest `buffer` trajectories of both
+        // sources. A share of this round's trajectories of each source is
+        // held out for the accuracy, and joins the buffer afterwards.
+        let (walk_eval, walk_train) = hold_out(walks, EVAL_PER_SOURCE);
+        let (goal_eval, goal_train) = hold_out(goal_trajectories, EVAL_PER_SOURCE);
+        let half = cfg.buffer.div_ceil(2);
+        push_newest(&mut self.buffer, walk_train, half);
+        push_newest(&mut self.gcp_buffer, goal_train, half);
         let mut last = None;
-        for _ in 0..cfg.latent_steps_per_round {
-            let batch: Vec<Trajectory> = (0..cfg.latent_batch)
-                .map(|_| self.buffer[rng.random_range(0..self.buffer.len())].clone())
-                .collect();
-            let tb = TrajectoryBatch::new(
-                &batch,
-                &self.latent.model().config().clone(),
-                tch::Device::Cpu,
-            )?;
-            last = Some(self.latent.train_step(&tb));
+        if !(self.buffer.is_empty() && self.gcp_buffer.is_empty()) {
+            for _ in 0..cfg.latent_steps_per_round {
+                let batch = mixed_batch(&self.buffer, &self.gcp_buffer, cfg.latent_batch, &mut rng);
+                let tb = TrajectoryBatch::new(
+                    &batch,
+                    &self.latent.model().config().clone(),
+                    tch::Device::Cpu,
+                )?;
+                last = Some(self.latent.train_step(&tb));
+            }
         }
-        let eval_set: Vec<Trajectory> = fresh.iter().take(256).cloned().collect();
+        let eval_set = mixed_eval(&walk_eval, &goal_eval);
         let eval = if eval_set.is_empty() {
             None
         } else {
@@ -608,6 +598,8 @@ impl Discovery {
             Some(self.latent.model().evaluate(&tb))
         };
         let accuracy = eval.as_ref().map_or(0.0, |e| e.reconstruction_accuracy);
+        push_newest(&mut self.buffer, walk_eval, half);
+        push_newest(&mut self.gcp_buffer, goal_eval, half);
 
         // 3. V_p: the top `pivotal_ratio` of the visited cells by prior mean.
         let visited: Vec<u32> = self.state.visits.keys().copied().collect();
@@ -657,22 +649,12 @@ impl Discovery {
     pub fn save(&mut self, dir: &Path) -> Result<(), LearnerError> {
         let latent = checkpoint::var_store_bytes(self.latent.var_store())?;
         let gcp = checkpoint::var_store_bytes(self.gcp.var_store())?;
-        self.state.buffer = self
-            .buffer
-            .iter()
-            .map(|t| {
-                (
-                    t.states
-                        .iter()
-                        .map(|s| (s.cell, s.direction, s.carried))
-                        .collect(),
-                    t.actions.clone(),
-                )
-            })
-            .collect();
+        self.state.buffer = self.buffer.iter().map(saved).collect();
+        self.state.gcp_buffer = self.gcp_buffer.iter().map(saved).collect();
         self.state.multipliers = Some(*self.latent.model().multipliers());
         let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e));
         self.state.buffer.clear();
+        self.state.gcp_buffer.clear();
         checkpoint::commit(
             dir,
             &[
@@ -715,24 +697,12 @@ impl Discovery {
         if let Some(m) = state.multipliers {
             self.latent.model_mut().set_multipliers(m);
         }
-        self.buffer = state
-            .buffer
-            .iter()
-            .map(|(s, a)| Trajectory {
-                states: s
-                    .iter()
-                    .map(|&(cell, direction, carried)| AgentPose {
-                        cell,
-                        direction,
-                        carried,
-                    })
-                    .collect(),
-                actions: a.clone(),
-            })
-            .collect();
+        self.buffer = state.buffer.iter().map(restored).collect();
+        self.gcp_buffer = state.gcp_buffer.iter().map(restored).collect();
         self.state = State {
             buffer: Vec::new(),
             config: self.state.config.clone(),
+            gcp_buffer: Vec::new(),
             ..state
         };
         Ok(true)
@@ -785,6 +755,92 @@ fn finish(w: &mut Walker, out: &mut Vec<Trajectory>) {
     }
     w.states.clear();
     w.actions.clear();
+}
+
+/// Trajectories of each source held out of a round's training to measure
+/// the reconstruction accuracy.
+const EVAL_PER_SOURCE: usize = 128;
+
+/// Splits `all` into (every `k`-th, up to `n`; the rest), keeping order:
+/// the held-out share is spread over the round.
+fn hold_out(all: Vec<Trajectory>, n: usize) -> (Vec<Trajectory>, Vec<Trajectory>) {
+    // Hold out at most a quarter, so a short round still trains.
+    let n = n.min(all.len() / 4);
+    let k = all.len().checked_div(n).unwrap_or(usize::MAX);
+    let (mut held, mut rest) = (Vec::new(), Vec::new());
+    for (i, t) in all.into_iter().enumerate() {
+        if held.len() < n && i % k == 0 {
+            held.push(t);
+        } else {
+            rest.push(t);
+        }
+    }
+    (held, rest)
+}
+
+/// Appends `fresh` to `buffer`, then drops the oldest beyond `cap`.
+fn push_newest(buffer: &mut Vec<Trajectory>, fresh: Vec<Trajectory>, cap: usize) {
+    buffer.extend(fresh);
+    if buffer.len() > cap {
+        let excess = buffer.len() - cap;
+        buffer.drain(..excess);
+    }
+}
+
+/// `size` trajectories drawn uniformly, half from each source (all from
+/// one when the other is empty). At least one source must hold one.
+fn mixed_batch(
+    walks: &[Trajectory],
+    goals: &[Trajectory],
+    size: usize,
+    rng: &mut SmallRng,
+) -> Vec<Trajectory> {
+    (0..size)
+        .map(|k| {
+            let from = match (walks.is_empty(), goals.is_empty()) {
+                (false, true) => walks,
+                (true, false) => goals,
+                _ if k.is_multiple_of(2) => walks,
+                _ => goals,
+            };
+            from[rng.random_range(0..from.len())].clone()
+        })
+        .collect()
+}
+
+/// The held-out trajectories in the training mix: as many of each source
+/// (the smaller count), or all of one when the other has none.
+fn mixed_eval(walks: &[Trajectory], goals: &[Trajectory]) -> Vec<Trajectory> {
+    let n = match (walks.len(), goals.len()) {
+        (0, g) => return goals[..g].to_vec(),
+        (w, 0) => return walks[..w].to_vec(),
+        (w, g) => w.min(g),
+    };
+    walks[..n].iter().chain(&goals[..n]).cloned().collect()
+}
+
+fn saved(t: &Trajectory) -> SavedTrajectory {
+    (
+        t.states
+            .iter()
+            .map(|s| (s.cell, s.direction, s.carried))
+            .collect(),
+        t.actions.clone(),
+    )
+}
+
+fn restored((states, actions): &SavedTrajectory) -> Trajectory {
+    Trajectory {
+        states: states
+            .iter()
+            .map(|&(cell, direction, carried)| AgentPose {
+                cell,
+                direction,
+                carried,
+            })
+            .collect(),
+        actions: actions.clone(),
+    }
 }
 
 fn ckpt(path: &Path, e: impl std::fmt::Display) -> LearnerError {

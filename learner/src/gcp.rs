@@ -5,8 +5,9 @@
 //! - **Goals.** "We train such an A2C-based goal-conditioned policy by
 //!   sampling goals using the end points of random walks with reasonable
 //!   length from a given starting state": every environment holds a goal
-//!   cell, the end of a random walk of [`GcpConfig::goal_walk_len`] moves
-//!   from the agent's current pose ([`GoalSampler`]). A *goal episode* ends
+//!   cell 1 to [`GcpConfig::goal_walk_len`] moves from the agent's current
+//!   cell by path distance in training, the end of a random walk of that
+//!   many moves in evaluation ([`GoalSampler`]). A *goal episode* ends
 //!   when the agent stands on the goal (reward [`GcpConfig::goal_reward`],
 //!   a success), at the time limit [`GcpConfig::goal_time_limit`] (a
 //!   failure) or when the environment's own episode ends; the next goal is
@@ -236,18 +237,33 @@ pub struct GcpStats {
     pub mean_curiosity: f64,
 }
 
-/// Draws goals as the end cells of random walks (section 3.2), simulated on
-/// a private environment built from the layout.
+/// Draws goals (section 3.2: "sampling goals using the end points of random
+/// walks with reasonable length from a given starting state"), two ways:
 ///
-/// The walk moves with the navigation actions only (turn left, turn right,
-/// forward), on the layout's geometry: balls and keys are lifted and doors
-/// opened, since the walk explores where the agent can go, not what it may
-/// carry. A walk that would end the episode (exit, lava) or that ends on
-/// its own start cell is redrawn.
+/// - [`GoalSampler::draw`]: the end cell of a random walk of `n` turn-or-
+///   forward actions (mostly one to three moves away). Evaluation draws
+///   these, so its figures stay comparable.
+/// - [`GoalSampler::draw_by_distance`]: a cell drawn uniformly among those
+///   whose shortest path from the agent's cell takes 1 to `n` moves (most
+///   of them `n/2` or more away, as there are more cells there). Training
+///   draws these: the walk ends were too near for `π_g`'s episodes to need
+///   any state between their ends, and [`GoalBook`] chains them besides.
+///
+/// Both work on the layout's geometry: balls and keys count as lifted and
+/// doors as open, since goals explore where the agent can go, not what it
+/// may carry. A walk that would end the episode (exit, lava) or ends on its
+/// own start cell is redrawn; path distances never pass through or end on
+/// such cells.
 #[derive(Debug)]
 pub struct GoalSampler {
     walker: Env,
+    width: usize,
+    /// Cells a goal may lie on or a path may pass through.
+    open: Vec<bool>,
     rng: SmallRng,
+    /// Breadth-first search scratch: distances from the last start.
+    distance: Vec<u32>,
+    queue: std::collections::VecDeque<usize>,
 }
 
 impl GoalSampler {
@@ -267,6 +283,16 @@ impl GoalSampler {
                 _ => *cell,
             };
         }
+        let open = geometry
+            .cells
+            .iter()
+            .map(|&c| {
+                !matches!(
+                    Object::from_code(c),
+                    Some(Object::Wall | Object::Exit | Object::Lava) | None
+                )
+            })
+            .collect();
         let cfg = EnvConfig {
             task: Task::MultiGoal,
             max_steps: u32::MAX,
@@ -275,15 +301,18 @@ impl GoalSampler {
         };
         GoalSampler {
             walker: Env::new(geometry, cfg, seed, 0),
+            width: layout.width,
+            open,
             rng: SmallRng::seed_from_u64(seed),
+            distance: vec![u32::MAX; layout.cells.len()],
+            queue: std::collections::VecDeque::new(),
         }
     }
 
     /// The end cell of a random walk of `walk_len` moves from `from`, never
     /// `from`'s own cell (unless no walk leaves it).
     pub fn draw(&mut self, from: Pose, walk_len: usize) -> u32 {
-        let width = self.walker.layout().width;
-        let start = from.y as usize * width + from.x as usize;
+        let start = from.y as usize * self.width + from.x as usize;
         let mut end = start;
         for _ in 0..Self::MAX_DRAWS {
             // A fresh copy per walk: nothing of an earlier walk carries over.
@@ -306,6 +335,44 @@ impl GoalSampler {
         }
         end as u32
     }
+
+    /// A goal cell 1 to `walk_len` moves from `from` by path distance,
+    /// never `from`'s own cell unless the agent cannot move.
+    pub fn draw_by_distance(&mut self, from: Pose, walk_len: usize) -> u32 {
+        let (w, n) = (self.width, self.open.len());
+        let start = from.y as usize * w + from.x as usize;
+        self.distance.fill(u32::MAX);
+        self.distance[start] = 0;
+        self.queue.clear();
+        self.queue.push_back(start);
+        let far = walk_len.max(1) as u32;
+        while let Some(i) = self.queue.pop_front() {
+            let d = self.distance[i];
+            if d == far {
+                continue;
+            }
+            let (x, y) = (i % w, i / w);
+            let next = [
+                (x + 1 < w).then(|| i + 1),
+                (x > 0).then(|| i - 1),
+                (i + w < n).then(|| i + w),
+                (y > 0).then(|| i - w),
+            ];
+            for j in next.into_iter().flatten() {
+                if self.open[j] && self.distance[j] == u32::MAX {
+                    self.distance[j] = d + 1;
+                    self.queue.push_back(j);
+                }
+            }
+        }
+        let candidates: Vec<usize> = (0..n)
+            .filter(|&i| self.distance[i] != u32::MAX && self.distance[i] >= 1)
+            .collect();
+        if candidates.is_empty() {
+            return start as u32;
+        }
+        candidates[self.rng.random_range(0..candidates.len())] as u32
+    }
 }
 
 /// One environment's current goal episode.
@@ -315,8 +382,10 @@ struct GoalEpisode {
     goal: u32,
     /// Steps taken towards it.
     steps: u32,
-    /// `(s_t, a_t)` since the goal was drawn; `states` ends with the pose the
-    /// agent stands on now.
+    /// Goals reached before this one within `trajectory`.
+    legs: usize,
+    /// `(s_t, a_t)` since the chain's first goal was drawn; `states` ends
+    /// with the pose the agent stands on now.
     trajectory: Trajectory,
 }
 
@@ -336,6 +405,15 @@ struct GoalStep {
 }
 
 /// The goal episodes of a batch of environments.
+///
+/// When recording, the goal episodes of one environment are **chained**:
+/// a reached goal is followed by the next from where the agent stands,
+/// and the trajectory goes on until [`GoalBook::LEGS`] goals were reached
+/// or one was missed. A trajectory then crosses rooms, and the states
+/// between its ends (the doorways it passes, where one leg turns into the
+/// next) carry the information the latent model is meant to find; a
+/// single leg's actions follow from its two ends alone. The A2C episodes
+/// (rewards, done flags, LSTM resets) are the single goals either way.
 #[derive(Debug)]
 struct GoalBook {
     walk_len: usize,
@@ -354,20 +432,16 @@ fn pose_of(meta: &EnvMeta) -> Pose {
     }
 }
 
+/// The pose of an observation record, as every trajectory source encodes
+/// it ([`AgentPose::from_meta`]).
 fn agent_pose(meta: &EnvMeta, width: usize) -> AgentPose {
-    let carried = if meta.carrying == EnvMeta::CARRYING_NOTHING {
-        0
-    } else {
-        meta.carrying
-    };
-    AgentPose {
-        cell: (meta.y as usize * width + meta.x as usize) as u32,
-        direction: meta.dir,
-        carried,
-    }
+    AgentPose::from_meta(meta, width)
 }
 
 impl GoalBook {
+    /// Goals chained into one recorded trajectory.
+    const LEGS: usize = 3;
+
     fn new(walk_len: usize, time_limit: u32, record: bool) -> GoalBook {
         GoalBook {
             walk_len,
@@ -384,9 +458,17 @@ impl GoalBook {
         meta: &EnvMeta,
         width: usize,
     ) -> GoalEpisode {
+        // Training (recording) goals by path distance, evaluation goals
+        // as random-walk ends ([`GoalSampler`]).
+        let goal = if self.record {
+            sampler.draw_by_distance(pose_of(meta), self.walk_len)
+        } else {
+            sampler.draw(pose_of(meta), self.walk_len)
+        };
         GoalEpisode {
-            goal: sampler.draw(pose_of(meta), self.walk_len),
+            goal,
             steps: 0,
+            legs: 0,
             trajectory: Trajectory {
                 states: vec![agent_pose(meta, width)],
                 actions: Vec::new(),
@@ -458,9 +540,18 @@ impl GoalBook {
                 steps: episode.steps,
             });
             if goal_done {
-                let next = self.fresh_episode(sampler, meta, width);
+                let legs = episode.legs + 1;
+                let chained = self.record && success && legs < Self::LEGS;
+                // The chain goes on: the next goal's steps extend this
+                // trajectory.
+                let kept = chained.then(|| std::mem::take(&mut episode.trajectory));
+                let mut next = self.fresh_episode(sampler, meta, width);
+                if let Some(trajectory) = kept {
+                    next.legs = legs;
+                    next.trajectory = trajectory;
+                }
                 let done = std::mem::replace(&mut self.episodes[i], next);
-                if self.record && !done.trajectory.actions.is_empty() {
+                if self.record && !chained && !done.trajectory.actions.is_empty() {
                     self.finished.push(done.trajectory);
                 }
             }
@@ -980,9 +1071,14 @@ mod tests {
         let layout = room();
         let mut sampler = GoalSampler::new(&layout, 9);
         let from = Pose { x: 1, y: 1, dir: 0 };
-        for walk_len in 1..=6 {
+        for (walk_len, by_distance) in (1..=6).flat_map(|n| [(n, false), (n, true)]) {
+            let mut farthest = 0;
             for _ in 0..200 {
-                let goal = sampler.draw(from, walk_len) as usize;
+                let goal = if by_distance {
+                    sampler.draw_by_distance(from, walk_len) as usize
+                } else {
+                    sampler.draw(from, walk_len) as usize
+                };
                 let (x, y) = (goal % layout.width, goal / layout.width);
                 assert_ne!((x, y), (1, 1), "a goal is never the agent's own cell");
                 assert_ne!(layout.cells[goal], Object::Wall as u8);
@@ -991,11 +1087,17 @@ mod tests {
                     Object::Exit as u8,
                     "walks that end the episode are redrawn"
                 );
-                // At most one cell per forward move.
+                // At most one cell per forward move (in this open room the
+                // path distance is the Manhattan distance).
                 assert!(
                     x - 1 + y - 1 <= walk_len,
                     "walk of {walk_len} reached ({x}, {y})"
                 );
+                farthest = farthest.max(x - 1 + y - 1);
+            }
+            if by_distance {
+                // The room's far corner is 8 moves away: goals reach `walk_len`.
+                assert_eq!(farthest, walk_len, "by distance, walk of {walk_len}");
             }
         }
         // Same seed, same goals.

@@ -20,6 +20,8 @@
 //!    next-hop table) and routes — nodes, cells and executable actions —
 //!    written into caller buffers.
 //!
+//! [`structure`] finds a maze's passages and rooms and measures how a node
+//! set covers them and how well a graph routes (`V_p` against `V_rand`).
 //! [`Coverage`] counts visited cells from observation batches. Everything
 //! here is pure: the iceoryx2 route service only turns requests into calls
 //! of [`WorldGraph::route_from_pose_into`] and friends.
@@ -63,6 +65,7 @@ mod error;
 mod ids;
 pub mod pivotal;
 pub mod shortest_path;
+pub mod structure;
 pub mod world_graph;
 
 pub use config::{CandidateSet, EdgeSearch, MAX_NODES, PlannerConfig};
@@ -71,4 +74,5 @@ pub use edges::{EdgePath, EdgeWorld};
 pub use error::PlannerError;
 pub use ids::{CellIdx, NodeId};
 pub use shortest_path::{ShortestPaths, UNREACHABLE};
+pub use structure::{MazeStructure, RoutingQuality, StructureCoverage, routing_quality};
 pub use world_graph::{Route, RouteWorld, WorldGraph};

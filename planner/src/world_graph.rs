@@ -852,10 +852,11 @@ impl WorldGraph {
 
     // ------------------------------------------------------------ picture --
 
-    /// The maze with the graph drawn on it, `px` pixels per cell: edges as
-    /// lines between node centres (dark for light edges, pale for heavy
-    /// ones; a directed edge is offset to its left and ends in an arrow
-    /// head, so `p → q` and `q → p` are told apart), nodes as discs.
+    /// The maze with the graph drawn on it, `px` pixels per cell: each edge
+    /// along its path, through the cells it visits (dark for light edges,
+    /// pale for heavy ones; every segment is offset to the left of its
+    /// direction and the last ends in an arrow head, so `p → q` and `q → p`
+    /// are told apart), nodes as discs.
     pub fn render(&self, px: usize) -> Canvas {
         let l = self.layout();
         let px = px.max(4);
@@ -876,28 +877,37 @@ impl WorldGraph {
                 0.0
             };
             let colour = lerp([20, 50, 170], [150, 175, 225], t);
-            let (a, b) = (
-                centre(self.nodes()[e.from.index()]),
-                centre(self.nodes()[e.to.index()]),
-            );
-            let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-            let len = (dx * dx + dy * dy).sqrt().max(1e-3);
-            let (ux, uy) = (dx / len, dy / len);
-            let off = (uy * s * 0.1, -ux * s * 0.1);
-            let (a, b) = ((a.0 + off.0, a.1 + off.1), (b.0 + off.0, b.1 + off.1));
-            canvas.line(a, b, (s * 0.1).max(1.0), colour, 0.85);
-            let tip = (b.0 - ux * s * 0.32, b.1 - uy * s * 0.32);
-            let base = (tip.0 - ux * s * 0.3, tip.1 - uy * s * 0.3);
-            let side = (-uy * s * 0.14, ux * s * 0.14);
-            canvas.fill_triangle(
-                [
-                    tip,
-                    (base.0 + side.0, base.1 + side.1),
-                    (base.0 - side.0, base.1 - side.1),
-                ],
-                colour,
-                0.9,
-            );
+            // The cells the path passes, each once in a row (turns stay).
+            let mut cells = vec![self.nodes()[e.from.index()]];
+            for &c in &e.cells {
+                if cells.last() != Some(&c) {
+                    cells.push(c);
+                }
+            }
+            let points: Vec<(f32, f32)> = cells.iter().map(|&c| centre(c)).collect();
+            for (k, pair) in points.windows(2).enumerate() {
+                let (a, b) = (pair[0], pair[1]);
+                let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+                let len = (dx * dx + dy * dy).sqrt().max(1e-3);
+                let (ux, uy) = (dx / len, dy / len);
+                let off = (uy * s * 0.12, -ux * s * 0.12);
+                let (a, b) = ((a.0 + off.0, a.1 + off.1), (b.0 + off.0, b.1 + off.1));
+                canvas.line(a, b, (s * 0.08).max(1.0), colour, 0.8);
+                if k + 2 == points.len() {
+                    let tip = (b.0 - ux * s * 0.3, b.1 - uy * s * 0.3);
+                    let base = (tip.0 - ux * s * 0.3, tip.1 - uy * s * 0.3);
+                    let side = (-uy * s * 0.14, ux * s * 0.14);
+                    canvas.fill_triangle(
+                        [
+                            tip,
+                            (base.0 + side.0, base.1 + side.1),
+                            (base.0 - side.0, base.1 - side.1),
+                        ],
+                        colour,
+                        0.9,
+                    );
+                }
+            }
         }
         for &c in self.nodes() {
             let (x, y) = centre(c);

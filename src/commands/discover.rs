@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use iceoryx2::prelude::ipc;
 use learner::batch_env::{BatchEnvironment, InProcess};
-use learner::discovery::{Discovery, DiscoveryConfig, RoundStats, doorway_cells};
+use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
 use learner::shm_env::{ShmEnv, ShmEnvOptions};
 use serde::Serialize;
 use shm_schemas::ObsShape;
@@ -88,14 +88,35 @@ pub struct DiscoverySummary {
     pub edges: usize,
     /// Node pairs with a path / all ordered pairs.
     pub connected_pairs: f64,
-    /// Doorway cells of the maze.
-    pub doorways: usize,
-    /// Fraction of `V_p` that are doorway cells.
-    pub doorway_fraction_of_pivotal: f64,
-    /// Fraction of free cells that are doorways (the chance level).
-    pub doorway_fraction_of_cells: f64,
-    /// Fraction of doorways that are pivotal.
-    pub doorways_found: f64,
+    /// Passages of the maze (doorways and 1-wide corridors between rooms,
+    /// [`planner::structure`]).
+    pub passages: usize,
+    /// Rooms of the maze.
+    pub rooms: usize,
+    /// Share of the passages with a pivotal state on or next to them.
+    pub passage_share: f64,
+    /// The same for random cells as many as `V_p` (mean of
+    /// [`RANDOM_DRAWS`] draws): the chance level.
+    pub passage_share_random: f64,
+    /// Share of the rooms holding a pivotal state.
+    pub room_share: f64,
+    /// The same for random cells (mean of [`RANDOM_DRAWS`] draws).
+    pub room_share_random: f64,
+    /// Routing through the world graph over `V_p` as built (walks, then
+    /// `π_g`'s refinement): route actions over shortest-path actions,
+    /// mean over [`ROUTE_PAIRS`] random pairs of cells.
+    pub route_stretch: f64,
+    /// The same graph's nodes with exact shortest edges (the planner's
+    /// search), as `V_rand` gets below: the node sets compared alone.
+    pub route_stretch_exact: f64,
+    /// Graphs over `V_rand` of the same size with exact shortest edges
+    /// (granted every advantage, as in the paper's comparison), mean
+    /// stretch over [`RANDOM_GRAPHS`] draws.
+    pub route_stretch_random: f64,
+    /// Fraction of the pairs the `V_p` graph routes at all.
+    pub routed: f64,
+    /// The same for the `V_rand` graphs (mean).
+    pub routed_random: f64,
     /// Latent model's reconstruction accuracy in the last round.
     pub reconstruction_accuracy: f64,
     /// `π_g` greedy success rate on goals within 10 steps.
@@ -366,7 +387,6 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         disc.build_graph(Task::MultiGoal)?
     };
     graph.save(&dir.join("graph.json"))?;
-    graph.save_png(&dir.join("graph.png"), 24)?;
     // What stage 2 (`worldgraph train --world-graph`) takes besides the
     // graph: π_g's settings and weights.
     sim::render::write_atomic(
@@ -378,10 +398,14 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let history = disc.history().to_vec();
     let env_steps: u64 = history.iter().map(|h| h.env_steps).sum();
     let loop_seconds: f64 = history.iter().map(|h| h.seconds).sum();
-    let doorways = doorway_cells(&layout);
     let pivotal = disc.pivotal_states();
-    let on_doorway = pivotal.iter().filter(|c| doorways.contains(c)).count();
-    let free = layout.free_cells().len();
+    let structure = StructureReport::measure(
+        &layout,
+        pivotal,
+        &graph,
+        &disc.graph_config(Task::MultiGoal),
+        seed,
+    )?;
     let n = graph.num_nodes();
     let connected = (0..n)
         .flat_map(|i| (0..n).map(move |j| (i, j)))
@@ -403,10 +427,17 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         } else {
             0.0
         },
-        doorways: doorways.len(),
-        doorway_fraction_of_pivotal: on_doorway as f64 / pivotal.len().max(1) as f64,
-        doorway_fraction_of_cells: doorways.len() as f64 / free.max(1) as f64,
-        doorways_found: on_doorway as f64 / doorways.len().max(1) as f64,
+        passages: structure.passages,
+        rooms: structure.rooms,
+        passage_share: structure.pivotal.passage_share,
+        passage_share_random: structure.random.passage_share,
+        room_share: structure.pivotal.room_share,
+        room_share_random: structure.random.room_share,
+        route_stretch: structure.routing.mean_stretch,
+        route_stretch_exact: structure.routing_exact.mean_stretch,
+        route_stretch_random: structure.routing_random.mean_stretch,
+        routed: structure.routing.routed,
+        routed_random: structure.routing_random.routed,
         reconstruction_accuracy: history.last().map_or(0.0, |h| h.reconstruction_accuracy),
         gcp_success_within_10: gcp_success,
         env_steps,
@@ -425,6 +456,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     )?;
     render_pivotal(&layout, &disc.prior_means(), pivotal, &graph)
         .save_png(&dir.join("pivotal.png"))?;
+    render_graph(&graph).save_png(&dir.join("graph.png"))?;
     curves(&history)
         .render(900, 520)
         .save_png(&dir.join("discovery_curves.png"))?;
@@ -482,7 +514,8 @@ fn build_graph_in_planner(
     })
 }
 
-/// The maze shaded by prior mean, with `V_p` and the graph's edges.
+/// The maze shaded by prior mean, with `V_p` and the graph's edges (along
+/// their paths).
 fn render_pivotal(
     layout: &Layout,
     prior: &[f32],
@@ -524,13 +557,108 @@ fn render_pivotal(
         let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
         ((x as f32 + 0.5) * px as f32, (y as f32 + 0.5) * px as f32)
     };
+    // Each edge along its path, through the cells it visits.
     for e in graph.edges() {
-        let (a, b) = (graph.nodes()[e.from.index()], graph.nodes()[e.to.index()]);
-        c.line(centre(a.0), centre(b.0), 2.0, [30, 30, 30], 0.55);
+        let mut at = graph.nodes()[e.from.index()].0;
+        for cell in &e.cells {
+            if cell.0 != at {
+                c.line(centre(at), centre(cell.0), 2.0, [30, 30, 30], 0.4);
+                at = cell.0;
+            }
+        }
     }
     for &p in pivotal {
         let (x, y) = centre(p);
         c.fill_disc(x, y, px as f32 * 0.3, [255, 140, 0], 1.0);
+    }
+    c
+}
+
+/// Random node sets drawn for the coverage's chance level.
+pub const RANDOM_DRAWS: usize = 1000;
+/// `V_rand` graphs built for the routing's chance level.
+pub const RANDOM_GRAPHS: usize = 5;
+/// Random pairs of cells routed per graph.
+pub const ROUTE_PAIRS: usize = 500;
+
+/// `V_p` against `V_rand` on the maze's structure (paper section 5,
+/// "Benefit of Learned Pivotal States").
+struct StructureReport {
+    passages: usize,
+    rooms: usize,
+    pivotal: planner::StructureCoverage,
+    random: planner::StructureCoverage,
+    routing: planner::RoutingQuality,
+    routing_exact: planner::RoutingQuality,
+    routing_random: planner::RoutingQuality,
+}
+
+impl StructureReport {
+    fn measure(
+        layout: &Layout,
+        pivotal: &[u32],
+        graph: &planner::WorldGraph,
+        graph_cfg: &planner::PlannerConfig,
+        seed: u64,
+    ) -> anyhow::Result<StructureReport> {
+        let s = planner::MazeStructure::new(layout);
+        let route_seed = sim::env_seed(seed, 0x0052_4f55_5445); // "ROUTE"
+        let exact = planner::PlannerConfig {
+            shorten: true,
+            ..graph_cfg.clone()
+        };
+        let nodes = planner::pivotal::nodes_from_cells(layout, pivotal);
+        let exact_graph = planner::WorldGraph::build(layout, &exact, &nodes)?;
+        let (mut stretch, mut routed) = (0.0, 0.0);
+        for k in 0..RANDOM_GRAPHS {
+            let cells =
+                planner::pivotal::v_rand(layout, nodes.len(), sim::env_seed(seed, k as u64))?;
+            let g = planner::WorldGraph::build(layout, &exact, &cells)?;
+            let q = planner::routing_quality(&g, ROUTE_PAIRS, route_seed);
+            stretch += q.mean_stretch / RANDOM_GRAPHS as f64;
+            routed += q.routed / RANDOM_GRAPHS as f64;
+        }
+        Ok(StructureReport {
+            passages: s.passages().len(),
+            rooms: s.rooms().len(),
+            pivotal: s.coverage(pivotal),
+            random: s.random_coverage(
+                pivotal.len(),
+                RANDOM_DRAWS,
+                sim::env_seed(seed, 0x0052_414e),
+            ),
+            routing: planner::routing_quality(graph, ROUTE_PAIRS, route_seed),
+            routing_exact: planner::routing_quality(&exact_graph, ROUTE_PAIRS, route_seed),
+            routing_random: planner::RoutingQuality {
+                mean_stretch: stretch,
+                routed,
+                pairs: ROUTE_PAIRS,
+            },
+        })
+    }
+}
+
+/// The world graph ([`planner::WorldGraph::render`]: edges along their
+/// paths) with the maze's passages shaded green under it.
+fn render_graph(graph: &planner::WorldGraph) -> Canvas {
+    let px = 24usize;
+    let layout = graph.layout();
+    let mut c = graph.render(px);
+    for p in planner::MazeStructure::new(layout).passages() {
+        for &cell in p {
+            let (x, y) = (
+                cell as usize % layout.width * px,
+                cell as usize / layout.width * px,
+            );
+            c.fill_rect(
+                x as i64 + 1,
+                y as i64 + 1,
+                px as i64 - 1,
+                px as i64 - 1,
+                [40, 170, 60],
+                0.35,
+            );
+        }
     }
     c
 }
@@ -582,16 +710,30 @@ fn print_summary(s: &DiscoverySummary, dir: &Path) {
             format!("{:.1}%", 100.0 * s.connected_pairs),
         ),
         (
-            "doorway cells in V_p",
-            format!("{:.1}%", 100.0 * s.doorway_fraction_of_pivotal),
+            "passages with a pivotal state on or next to",
+            format!(
+                "{:.0}% (random {:.0}%) of {}",
+                100.0 * s.passage_share,
+                100.0 * s.passage_share_random,
+                s.passages
+            ),
         ),
         (
-            "  chance (doorways among free cells)",
-            format!("{:.1}%", 100.0 * s.doorway_fraction_of_cells),
+            "rooms holding a pivotal state",
+            format!(
+                "{:.0}% (random {:.0}%) of {}",
+                100.0 * s.room_share,
+                100.0 * s.room_share_random,
+                s.rooms
+            ),
         ),
         (
-            "doorways found",
-            format!("{:.1}%", 100.0 * s.doorways_found),
+            "route / shortest: V_p graph (exact edges)",
+            format!("{:.3} ({:.3})", s.route_stretch, s.route_stretch_exact),
+        ),
+        (
+            "  V_rand graphs, exact edges",
+            format!("{:.3}", s.route_stretch_random),
         ),
         (
             "reconstruction accuracy",
@@ -611,5 +753,7 @@ fn print_summary(s: &DiscoverySummary, dir: &Path) {
     for (k, v) in rows {
         println!("  {k:<44} {v:>12}");
     }
-    println!("  pictures: pivotal.png (prior mean, V_p, edges), graph.png, discovery_curves.png");
+    println!(
+        "  pictures: pivotal.png (prior mean, V_p, edges), graph.png (edges along their paths, passages in green), discovery_curves.png"
+    );
 }

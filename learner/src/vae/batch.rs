@@ -32,6 +32,25 @@ impl AgentPose {
             carried: 0,
         }
     }
+
+    /// The pose an observation record shows, on a grid `width` cells wide:
+    /// the one constructor of every trajectory source (random walks, path
+    /// replays and `π_g`'s goal episodes go into one buffer, so one pose
+    /// must have one encoding). `carried` is the carried object's cell code
+    /// (`sim::Object as u8`: a ball 2, a key 3), 0 for nothing: no object
+    /// that can be carried has code 0 (floor).
+    pub fn from_meta(meta: &sim::EnvMeta, width: usize) -> Self {
+        let carried = if meta.carrying == sim::EnvMeta::CARRYING_NOTHING {
+            0
+        } else {
+            meta.carrying
+        };
+        Self {
+            cell: (meta.y as usize * width + meta.x as usize) as u32,
+            direction: meta.dir & 3,
+            carried,
+        }
+    }
 }
 
 /// One trajectory: `states.len() == actions.len() + 1 ≥ 2`.

@@ -34,9 +34,16 @@ pub struct LatentConfig {
     pub prior_hidden: i64,
 
     // ---- objective ----
-    /// `μ0`: target number of kept interior states per trajectory
-    /// (L0 targets `μ0`, the transition regulariser `2·μ0`).
-    pub target_kept: f64,
+    /// `μ0 / T`: kept interior states per interior state. The paper states
+    /// `μ0` "given a sequence of length `T`" (section 3.1), so the target
+    /// of a trajectory grows with it: `μ0 = kept_per_step · (T − 1)` for its
+    /// `T − 1` interior states. L0 targets `μ0`; the transition regulariser
+    /// targets the changes `μ0` isolated kept states make, `2·μ0`, plus the
+    /// two that the fixed boundary latents `z_0 = z_T = 1` always add. (A
+    /// fixed count per trajectory pushed short trajectories to keep
+    /// everything, and targeting `2·μ0` changes including the boundaries'
+    /// pulled L0 and LT apart by one kept state.)
+    pub kept_per_step: f64,
     /// Tolerance of the KL constraint, nats per trajectory: the multiplier
     /// `λ1` grows while the moving average of the KL exceeds it.
     pub kl_budget: f64,
@@ -76,7 +83,7 @@ impl Default for LatentConfig {
             action_dim: 8,
             lstm_hidden: 64,
             prior_hidden: 64,
-            target_kept: 2.0,
+            kept_per_step: 0.1,
             kl_budget: 1.0,
             l0_tolerance: 0.5,
             transition_tolerance: 1.0,
@@ -110,7 +117,7 @@ impl LatentConfig {
             }
         }
         let non_negative = [
-            ("target_kept", self.target_kept),
+            ("kept_per_step", self.kept_per_step),
             ("kl_budget", self.kl_budget),
             ("l0_tolerance", self.l0_tolerance),
             ("transition_tolerance", self.transition_tolerance),
@@ -195,7 +202,7 @@ mod tests {
                 ..Default::default()
             },
             LatentConfig {
-                target_kept: -1.0,
+                kept_per_step: -1.0,
                 ..Default::default()
             },
             LatentConfig {
@@ -213,7 +220,7 @@ mod tests {
         ];
         let fields = [
             "num_cells",
-            "target_kept",
+            "kept_per_step",
             "lambda_init",
             "constraint_decay",
             "learning_rate",

@@ -4,8 +4,15 @@
 //! ```text
 //! max_λ min_{θ,φ,ψ}  −E_q[log p_θ(A | S, Z)] + λ1·KL(q_φ ‖ p_ψ) + λ2·L0 + λ3·LT
 //! L0 = (E_q[Σ_t 1{z_t ≠ 0}] − μ0)²
-//! LT = (E_q[Σ_t 1{z_t ≠ z_{t+1}}] − 2·μ0)²
+//! LT = (E_q[Σ_t 1{z_t ≠ z_{t+1}}] − 2·μ0 − 2)²
 //! ```
+//!
+//! `μ0` is per trajectory, proportional to its length ("`μ0` of activated
+//! `z_t = 1` given a sequence of length `T`"): `μ0 = kept_per_step · (T − 1)`
+//! over its `T − 1` interior states ([`LatentConfig::kept_per_step`]). The
+//! transition count runs over the whole trajectory, boundaries included, so
+//! `μ0` isolated kept interior states make `2·μ0 + 2` changes: the `+ 2`
+//! keeps L0 and LT from asking for different numbers of kept states.
 //!
 //! Every term is a per-trajectory quantity averaged over the batch; padding
 //! never counts. The boundary latents are fixed (`z_0 = z_T = 1`), so the KL
@@ -43,7 +50,7 @@ pub struct ElboTerms {
     pub prior_fit: Tensor,
     /// `L0 = (E_q[‖Z‖₀] − μ0)²`.
     pub l0: Tensor,
-    /// `LT = (E_q[#changes] − 2·μ0)²`.
+    /// `LT = (E_q[#changes] − 2·μ0 − 2)²`.
     pub transition: Tensor,
     /// `E_q[‖Z‖₀]`, the expected number of kept interior states (no grad).
     pub expected_kept: f64,
@@ -82,14 +89,15 @@ pub fn action_nll(logits: &Tensor, batch: &TrajectoryBatch) -> (Tensor, Tensor) 
 /// - `posterior`: `HardKuma(ã_t, 1)` with `ã` of shape `[L, B]`;
 /// - `prior`: `Beta(α_t, β_t)`, each `[L, B]`;
 /// - `z`: the sampled latents fed to the decoder, `[L, B]` (boundaries 1);
-/// - `logits`: decoder outputs `[L, B, A]`.
+/// - `logits`: decoder outputs `[L, B, A]`;
+/// - `kept_per_step`: `μ0 / (T − 1)`, see the module docs.
 pub fn elbo_terms(
     posterior: &HardKuma,
     prior: &BetaPrior,
     z: &Tensor,
     logits: &Tensor,
     batch: &TrajectoryBatch,
-    target_kept: f64,
+    kept_per_step: f64,
 ) -> ElboTerms {
     let interior = batch.interior_mask();
     let (nll, correct) = action_nll(logits, batch);
@@ -102,8 +110,15 @@ pub fn elbo_terms(
     let prob_zero = posterior.prob_zero() * &interior;
     let kept = hardkuma::expected_nonzero(&prob_zero, &interior);
     let changes = hardkuma::expected_transitions(&prob_zero, &batch.state_mask);
-    let l0 = (&kept - target_kept).square().mean(None::<Kind>);
-    let transition = (changes - 2.0 * target_kept).square().mean(None::<Kind>);
+    // μ0 of each trajectory, `[B]`, and the changes its boundaries add
+    // (two when it has an interior state).
+    let interior_states = interior.sum_dim_intlist(0_i64, false, None::<Kind>);
+    let mu0 = &interior_states * kept_per_step;
+    let boundary_changes = interior_states.clamp_max(1.0) * 2.0;
+    let l0 = (&kept - &mu0).square().mean(None::<Kind>);
+    let transition = (changes - mu0 * 2.0 - boundary_changes)
+        .square()
+        .mean(None::<Kind>);
 
     let interior_count = interior.sum(None::<Kind>).double_value(&[]).max(1.0);
     let action_count = batch

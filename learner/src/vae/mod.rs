@@ -81,9 +81,9 @@ pub struct LatentStats {
     pub reconstruction_accuracy: f64,
     /// `KL(q ‖ p)` summed over interior states.
     pub kl: f64,
-    /// `L0 = (E[‖Z‖₀] − μ0)²`.
+    /// `L0 = (E[‖Z‖₀] − μ0)²`, `μ0` per trajectory length.
     pub l0: f64,
-    /// `LT = (E[#changes] − 2μ0)²`.
+    /// `LT = (E[#changes] − 2μ0 − 2)²` (the boundaries' two changes).
     pub transition: f64,
     /// `E[‖Z‖₀]`: expected kept interior states per trajectory.
     pub expected_kept: f64,
@@ -307,7 +307,14 @@ impl LatentModel {
         let prior = self.prior(batch);
         let z = self.latents(&posterior, batch, Some(noise));
         let logits = self.decoder.forward(batch, &z);
-        elbo::elbo_terms(&posterior, &prior, &z, &logits, batch, self.cfg.target_kept)
+        elbo::elbo_terms(
+            &posterior,
+            &prior,
+            &z,
+            &logits,
+            batch,
+            self.cfg.kept_per_step,
+        )
     }
 
     /// One optimisation step: descend the Lagrangian
