@@ -290,8 +290,16 @@ mod tests {
                         Execution::Replay,
                         &mut route,
                     );
+                    let reachable = g.distance(
+                        g.node_at(CellIdx(from)).expect("node"),
+                        g.node_at(CellIdx(to)).expect("node"),
+                    ) != planner::UNREACHABLE;
                     let Some(mut t) = t else {
-                        assert!(from == to, "{}: no route {from} → {to}", layout.name);
+                        assert!(
+                            from == to || !reachable,
+                            "{}: the graph has a path {from} → {to} but no route was planned",
+                            layout.name
+                        );
                         continue;
                     };
                     planned += 1;
@@ -309,7 +317,8 @@ mod tests {
                     assert_eq!(env.cell() as u32, to);
                 }
             }
-            assert!(planned >= nodes.len() * (nodes.len() - 1) / 2, "{planned}");
+            // Random walks join most pairs of the 12 nodes.
+            assert!(planned >= nodes.len() * (nodes.len() - 1) / 2, "{}: {planned} routes", layout.name);
         }
     }
 
