@@ -261,3 +261,50 @@ impl Drop for Pipeline {
         }
     }
 }
+
+/// A sim process stepping `envs` environments of `w` in one slice (the
+/// learner's algorithms step the whole batch at once) for a learner in this
+/// process, and the shared-memory client of its batch: the transport of
+/// `discover --pipeline` and `train --pipeline`. The sim exits when this
+/// process goes; stop it with [`Pipeline::stop_all`] and tear the run down.
+pub fn spawn_sim_env(
+    w: &WorldArgs,
+    envs: usize,
+    run_name: &str,
+    dir: &Path,
+) -> anyhow::Result<(learner::shm_env::ShmEnv<iceoryx2::prelude::ipc::Service>, Pipeline)> {
+    let (layout, env_cfg) = w.build()?;
+    let mut words = vec!["sim".to_string(), "serve".into()];
+    words.extend(world_words(w));
+    words.extend([
+        "--run".into(),
+        run_name.to_string(),
+        "--run-dir".into(),
+        dir.display().to_string(),
+        "--envs".into(),
+        envs.to_string(),
+        "--slices".into(),
+        "1".into(),
+        "--on-peer-death".into(),
+        "exit".into(),
+    ]);
+    let mut p = Pipeline::new(vec![(Role::Sim, words)], Some(dir))?;
+    p.spawn(Role::Sim)?;
+    let run = shm_schemas::service::RunName::new(run_name)?;
+    let shape = shm_schemas::ObsShape::new(envs, layout.width, layout.height)?;
+    let opts = learner::shm_env::ShmEnvOptions {
+        node_name: crate::roles::LEARNER_NODE.into(),
+        sim_node_name: crate::roles::SIM_NODE.into(),
+        connect_timeout: Duration::from_secs(60),
+        task: Some(env_cfg.task.name().into()),
+        ..learner::shm_env::ShmEnvOptions::default()
+    };
+    let env = learner::shm_env::ShmEnv::connect(
+        &shm_schemas::service::run_config(&run)?,
+        run,
+        shape,
+        env_cfg.task.num_actions(),
+        opts,
+    )?;
+    Ok((env, p))
+}

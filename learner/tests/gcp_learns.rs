@@ -83,12 +83,10 @@ fn train_and_evaluate(
 
 const ITERATIONS: usize = 400;
 
-/// Measured (release, 2 shared cores, libtorch on 1 thread): greedy success
-/// on held-out goals 0.000 untrained → 0.981 after 400 updates (32 envs ×
-/// 16 steps each, 205k env steps) in 15.6 s of training. Seeds 2 and 3 (the
-/// ignored test below): 0.000 → 0.978 and 0.277 → 0.955. The untrained
-/// greedy policy mostly repeats one action; sampling from it reaches about
-/// half of its goals within the time limit of 16 steps.
+/// 400 updates of 32 envs × 16 steps (205k env steps); the test prints the
+/// greedy success before and after (`--nocapture`). The untrained greedy
+/// policy mostly repeats one action; sampling from it reaches about half of
+/// its goals within the time limit of 16 steps.
 ///
 /// The trained policy then refines a world graph of the room (section 3.3,
 /// "each path is further refined by `π_g` if feasible"): four nodes, edges

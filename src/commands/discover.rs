@@ -7,20 +7,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use iceoryx2::prelude::ipc;
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
-use learner::shm_env::{ShmEnv, ShmEnvOptions};
 use serde::Serialize;
-use shm_schemas::ObsShape;
-use shm_schemas::service::{RunName, run_config};
 use sim::chart::{LineChart, Series, XScale};
 use sim::render::{Canvas, draw_grid};
 use sim::{Layout, Maze, Object, Task};
 
 use super::run::teardown;
 use crate::pipeline::{Pipeline, Role, world_words};
-use crate::roles::{LEARNER_NODE, SIM_NODE};
 use crate::world::WorldArgs;
 
 /// `discover` options.
@@ -293,42 +288,9 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     };
     let mut pipeline = None;
     let mut env: Box<dyn BatchEnvironment> = if a.pipeline {
-        let mut words = vec!["sim".to_string(), "serve".into()];
-        words.extend(world_words(&w));
-        words.extend([
-            "--run".into(),
-            run_name.clone(),
-            "--run-dir".into(),
-            dir.display().to_string(),
-        ]);
-        // The learner's algorithms step the whole batch at once: one slice.
-        words.extend([
-            "--envs".into(),
-            a.envs.to_string(),
-            "--slices".into(),
-            "1".into(),
-            "--on-peer-death".into(),
-            "exit".into(),
-        ]);
-        let mut p = Pipeline::new(vec![(Role::Sim, words)], Some(&dir))?;
-        p.spawn(Role::Sim)?;
+        let (env, p) = crate::pipeline::spawn_sim_env(&w, a.envs, &run_name, &dir)?;
         pipeline = Some(p);
-        let run = RunName::new(&run_name)?;
-        let shape = ObsShape::new(a.envs, layout.width, layout.height)?;
-        let opts = ShmEnvOptions {
-            node_name: LEARNER_NODE.into(),
-            sim_node_name: SIM_NODE.into(),
-            connect_timeout: Duration::from_secs(60),
-            task: Some(env_cfg.task.name().into()),
-            ..ShmEnvOptions::default()
-        };
-        Box::new(ShmEnv::<ipc::Service>::connect(
-            &run_config(&run)?,
-            run,
-            shape,
-            num_actions,
-            opts,
-        )?)
+        Box::new(env)
     } else {
         Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, seed, 1)?)
     };

@@ -397,13 +397,10 @@ pub fn eval_env(
 /// shared-memory client of its batch.
 fn pipeline_env(
     a: &TrainArgs,
-    layout: &Layout,
-    env_cfg: EnvConfig,
     envs: usize,
     seed: u64,
     dir: &Path,
 ) -> anyhow::Result<(Box<dyn BatchEnvironment>, (crate::pipeline::Pipeline, String))> {
-    use crate::pipeline::{Pipeline, Role, world_words};
     let run_name = format!("train-{}", std::process::id());
     let w = crate::world::WorldArgs {
         maze: a.maze,
@@ -413,38 +410,7 @@ fn pipeline_env(
         max_steps: None,
         balls: None,
     };
-    let mut words = vec!["sim".to_string(), "serve".into()];
-    words.extend(world_words(&w));
-    words.extend([
-        "--run".into(),
-        run_name.clone(),
-        "--run-dir".into(),
-        dir.display().to_string(),
-        "--envs".into(),
-        envs.to_string(),
-        "--slices".into(),
-        "1".into(),
-        "--on-peer-death".into(),
-        "exit".into(),
-    ]);
-    let mut p = Pipeline::new(vec![(Role::Sim, words)], Some(dir))?;
-    p.spawn(Role::Sim)?;
-    let run = shm_schemas::service::RunName::new(&run_name)?;
-    let shape = shm_schemas::ObsShape::new(envs, layout.width, layout.height)?;
-    let opts = learner::shm_env::ShmEnvOptions {
-        node_name: crate::roles::LEARNER_NODE.into(),
-        sim_node_name: crate::roles::SIM_NODE.into(),
-        connect_timeout: std::time::Duration::from_secs(60),
-        task: Some(env_cfg.task.name().into()),
-        ..learner::shm_env::ShmEnvOptions::default()
-    };
-    let env = learner::shm_env::ShmEnv::<iceoryx2::prelude::ipc::Service>::connect(
-        &shm_schemas::service::run_config(&run)?,
-        run,
-        shape,
-        env_cfg.task.num_actions(),
-        opts,
-    )?;
+    let (env, p) = crate::pipeline::spawn_sim_env(&w, envs, &run_name, dir)?;
     Ok((Box::new(env), (p, run_name)))
 }
 
@@ -657,7 +623,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         // uninterrupted one.
         let seg_seed = sim::env_seed(a.seed, state.segments_done);
         let (mut env, pipeline) = if a.pipeline {
-            let (env, p) = pipeline_env(&a, &layout, env_cfg, cfg.agent.envs, seg_seed, &dir)?;
+            let (env, p) = pipeline_env(&a, cfg.agent.envs, seg_seed, &dir)?;
             (env, Some(p))
         } else {
             let env: Box<dyn BatchEnvironment> =
