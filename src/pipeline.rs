@@ -272,7 +272,10 @@ pub fn spawn_sim_env(
     envs: usize,
     run_name: &str,
     dir: &Path,
-) -> anyhow::Result<(learner::shm_env::ShmEnv<iceoryx2::prelude::ipc::Service>, Pipeline)> {
+) -> anyhow::Result<(
+    learner::shm_env::ShmEnv<iceoryx2::prelude::ipc::Service>,
+    Pipeline,
+)> {
     let (layout, env_cfg) = w.build()?;
     let mut words = vec!["sim".to_string(), "serve".into()];
     words.extend(world_words(w));

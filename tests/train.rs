@@ -101,10 +101,26 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
     // The environments in a sim process over shared memory: the same run.
     let p = dir.path().join("pipeline");
     ok(&worldgraph(&[
-        "train", "--task", "multigoal", "--maze", "small", "--agent", "a2c", "--seed", "3",
-        "--config", &cfg, "--run", p.to_str().unwrap(), "--pipeline",
+        "train",
+        "--task",
+        "multigoal",
+        "--maze",
+        "small",
+        "--agent",
+        "a2c",
+        "--seed",
+        "3",
+        "--config",
+        &cfg,
+        "--run",
+        p.to_str().unwrap(),
+        "--pipeline",
     ]));
-    assert_eq!(read(&p.join("metrics.csv")), read(&a.join("metrics.csv")), "--pipeline gives the in-process metrics");
+    assert_eq!(
+        read(&p.join("metrics.csv")),
+        read(&a.join("metrics.csv")),
+        "--pipeline gives the in-process metrics"
+    );
     for f in [
         "config.toml",
         "metrics.csv",

@@ -400,7 +400,10 @@ fn pipeline_env(
     envs: usize,
     seed: u64,
     dir: &Path,
-) -> anyhow::Result<(Box<dyn BatchEnvironment>, (crate::pipeline::Pipeline, String))> {
+) -> anyhow::Result<(
+    Box<dyn BatchEnvironment>,
+    (crate::pipeline::Pipeline, String),
+)> {
     let run_name = format!("train-{}", std::process::id());
     let w = crate::world::WorldArgs {
         maze: a.maze,
@@ -626,8 +629,13 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             let (env, p) = pipeline_env(&a, cfg.agent.envs, seg_seed, &dir)?;
             (env, Some(p))
         } else {
-            let env: Box<dyn BatchEnvironment> =
-                Box::new(InProcess::new(layout.clone(), env_cfg, cfg.agent.envs, seg_seed, 1)?);
+            let env: Box<dyn BatchEnvironment> = Box::new(InProcess::new(
+                layout.clone(),
+                env_cfg,
+                cfg.agent.envs,
+                seg_seed,
+                1,
+            )?);
             (env, None)
         };
         agent.start_segment(env.as_mut(), state.segments_done)?;

@@ -602,6 +602,14 @@ impl HrlAgent {
         env: &mut dyn BatchEnvironment,
         segment: u64,
     ) -> Result<(), LearnerError> {
+        let n = self.check_batch(env)?;
+        env.step(&vec![action::RESET; n])?;
+        self.ctl = self.controller(n, sim::env_seed(self.seed ^ SEGMENT_SALT, segment));
+        Ok(())
+    }
+
+    /// The batch's size, which must be the one the agent trains on.
+    fn check_batch(&self, env: &dyn BatchEnvironment) -> Result<usize, LearnerError> {
         let n = env.num_envs();
         if n != self.cfg.envs {
             return Err(ConfigError::new(
@@ -613,9 +621,7 @@ impl HrlAgent {
             )
             .into());
         }
-        env.step(&vec![action::RESET; n])?;
-        self.ctl = self.controller(n, sim::env_seed(self.seed ^ SEGMENT_SALT, segment));
-        Ok(())
+        Ok(n)
     }
 
     /// Where training time went since the last call.
@@ -1005,17 +1011,7 @@ impl HrlAgent {
         &mut self,
         env: &mut dyn BatchEnvironment,
     ) -> Result<IterationStats, LearnerError> {
-        let n = env.num_envs();
-        if n != self.cfg.envs {
-            return Err(ConfigError::new(
-                "envs",
-                format!(
-                    "the agent was built for {} environments, the batch has {n}",
-                    self.cfg.envs
-                ),
-            )
-            .into());
-        }
+        self.check_batch(env)?;
         let empty = self.controller(0, 0);
         let mut ctl = std::mem::replace(&mut self.ctl, empty);
         self.rollout.start(&ctl.worker_state);

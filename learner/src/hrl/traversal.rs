@@ -318,7 +318,11 @@ mod tests {
                 }
             }
             // Random walks join most pairs of the 12 nodes.
-            assert!(planned >= nodes.len() * (nodes.len() - 1) / 2, "{}: {planned} routes", layout.name);
+            assert!(
+                planned >= nodes.len() * (nodes.len() - 1) / 2,
+                "{}: {planned} routes",
+                layout.name
+            );
         }
     }
 
