@@ -13,6 +13,7 @@ mod commands;
 mod latency;
 mod pipeline;
 mod progress;
+mod results;
 mod roles;
 mod world;
 
@@ -46,6 +47,12 @@ enum Command {
     Train(commands::train::TrainArgs),
     /// Score a `train` run's best checkpoint on any range of test seeds.
     Evaluate(commands::train::EvaluateArgs),
+    /// The paper's ablation study: a grid of (maze, task, agent, seed) runs,
+    /// side by side, resumable, each summary written under `results/`.
+    Experiment(commands::experiment::ExperimentArgs),
+    /// Render `results/` as the paper's Tables 1 and 2 with time to score
+    /// and the Figure 4 curves (`docs/results.md`).
+    Table(commands::table::TableArgs),
     /// Simulator tools: render a maze, trace an action sequence.
     #[command(subcommand)]
     Sim(commands::sim::SimCommand),
@@ -86,6 +93,8 @@ fn run() -> anyhow::Result<ExitCode> {
         Command::Soak(a) => commands::soak::run(a),
         Command::Train(a) => commands::train::run(a),
         Command::Evaluate(a) => commands::train::evaluate(a),
+        Command::Experiment(a) => commands::experiment::run(a),
+        Command::Table(a) => commands::table::run(a),
         Command::Sim(cmd) => commands::sim::run(cmd),
         Command::Learner(LearnerCommand::Serve(a)) => roles::learner::serve(a),
         Command::Planner(PlannerCommand::Serve(a)) => roles::planner::serve(a),

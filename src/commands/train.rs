@@ -239,6 +239,10 @@ pub struct TestSummary {
     pub train_steps_per_sec: f64,
     /// Validation curve: `(env steps, score)`.
     pub validation_curve: Vec<(u64, f64)>,
+    /// Training wall seconds at each point of the validation curve (for
+    /// time to score).
+    #[serde(default)]
+    pub validation_wall_seconds: Vec<f64>,
 }
 
 fn agent_config(a: &TrainArgs, base: &AgentConfig) -> AgentConfig {
@@ -429,6 +433,38 @@ fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
     })
 }
 
+/// Holds `<run>/lock` for the run's lifetime: a second `train` on the same
+/// directory is refused at once, naming the process that holds it.
+fn lock_run_dir(dir: &Path) -> anyhow::Result<std::fs::File> {
+    use std::io::Write;
+    let path = dir.join("lock");
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .read(true)
+        .write(true)
+        .open(&path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    match f.try_lock() {
+        Ok(()) => {
+            f.set_len(0)?;
+            write!(f, "{}", std::process::id())?;
+            Ok(f)
+        }
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let holder = std::fs::read_to_string(&path).unwrap_or_default();
+            bail!(
+                "{} is in use by another train process (pid {}); wait for it to end or use another --run",
+                dir.display(),
+                holder.trim()
+            )
+        }
+        Err(std::fs::TryLockError::Error(e)) => {
+            Err(e).with_context(|| format!("cannot lock {}", path.display()))
+        }
+    }
+}
+
 fn save_state(
     dir: &Path,
     state: &RunState,
@@ -547,6 +583,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     let env_cfg = EnvConfig::for_task(a.task, &layout);
     let dir = run_dir(&a, &layout, &cfg.agent);
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let _lock = lock_run_dir(&dir)?;
     let world_graph = match &a.world_graph {
         Some(p) => Some(
             std::fs::canonicalize(p)
@@ -727,6 +764,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             .iter()
             .map(|r| (r.env_steps, r.validation_score))
             .collect(),
+        validation_wall_seconds: state.wall_seconds.clone(),
     };
     write_atomic(
         &dir.join("test.json"),

@@ -1,0 +1,1003 @@
+//! `worldgraph experiment GRID.toml`: the paper's ablation study (section 5,
+//! Control Experiments) as a grid of runs — maze × task × agent
+//! configuration × training seed — under the paper's protocol (each run's
+//! best checkpoint picked on 10 validation seeds, scored on 100 held-out
+//! test seeds; see `train`).
+//!
+//! The grid discovers the world graphs its configurations need (`V_p` and
+//! `V_rand` come from one `discover` run per maze and seed) and reuses them;
+//! it runs as many runs side by side as asked (one libtorch thread each by
+//! default), each a `worldgraph train` child process with its log in
+//! `<work>/logs/`. Every finished run writes its summary under `results/`
+//! ([`crate::results`]); killed and restarted, the grid skips the runs that
+//! have one and resumes the others from their checkpoints.
+
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use learner::hrl::{AgentConfig, AgentKind, Candidates};
+use serde::{Deserialize, Serialize};
+use sim::render::write_atomic;
+use sim::{Maze, Task};
+
+use super::train::{TestSummary, TrainConfig};
+use crate::results::{
+    CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, current_commit,
+    discover_path, read_run, run_path,
+};
+
+/// A grid file (`experiments/*.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Grid {
+    /// Name; the runs' working files go to `runs/experiments/<name>/`.
+    pub name: String,
+    /// Training seeds of every cell (the paper: 3).
+    pub seeds: Vec<u64>,
+    /// Validation seeds of each run (the paper: 10).
+    #[serde(default = "default_validation_seeds")]
+    pub validation_seeds: usize,
+    /// Test seeds of each run (the paper: 100).
+    #[serde(default = "default_test_seeds")]
+    pub test_seeds: usize,
+    /// Budgets, one per maze of the grid.
+    pub maze: Vec<MazeBudget>,
+    /// Cells: tasks × configurations (× the grid's mazes and seeds).
+    pub group: Vec<Group>,
+}
+
+fn default_validation_seeds() -> usize {
+    10
+}
+
+fn default_test_seeds() -> usize {
+    100
+}
+
+/// One maze's budget.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MazeBudget {
+    /// The embedded maze.
+    pub name: Maze,
+    /// Env steps of each training run.
+    pub env_steps: u64,
+    /// Env steps between validations (and checkpoints).
+    pub eval_every: u64,
+    /// Rounds of the maze's world graph discovery (one per training seed).
+    pub discover_rounds: u32,
+}
+
+/// A block of cells: every task with every configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Group {
+    /// The paper's table the cells fill (1: the MultiGoal tasks, 2: Door-Key).
+    pub table: u8,
+    /// Tasks, by their command-line names (`multigoal`, `multigoal-sparse`,
+    /// `multigoal-stochastic`, `doorkey`).
+    #[serde(with = "task_names")]
+    pub tasks: Vec<Task>,
+    /// Agent configurations by name: `a2c`, `fn`, `fn-init`, or
+    /// `wn-<all|random|pivotal>[-trav][-init]`.
+    pub configs: Vec<String>,
+    /// Mazes of the group [default: every maze of the grid].
+    #[serde(default)]
+    pub mazes: Vec<Maze>,
+}
+
+/// Tasks by their command-line names in grid files.
+mod task_names {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use sim::Task;
+
+    pub fn serialize<S: Serializer>(tasks: &[Task], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(tasks.iter().map(|t| t.name()))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Task>, D::Error> {
+        Vec::<String>::deserialize(d)?
+            .iter()
+            .map(|n| n.parse::<Task>().map_err(serde::de::Error::custom))
+            .collect()
+    }
+}
+
+/// The agent settings a configuration name stands for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConfigName {
+    /// Agent kind.
+    pub kind: AgentKind,
+    /// WN's wide-goal candidates.
+    pub candidates: Candidates,
+    /// World graph traversal.
+    pub traversal: bool,
+    /// `π_g` initialisation.
+    pub init: bool,
+}
+
+impl ConfigName {
+    /// Parses a configuration name (the inverse of [`AgentConfig::name`]).
+    pub fn parse(name: &str) -> anyhow::Result<ConfigName> {
+        let mut rest = name;
+        let init = match rest.strip_suffix("-init") {
+            Some(r) => {
+                rest = r;
+                true
+            }
+            None => false,
+        };
+        let traversal = match rest.strip_suffix("-trav") {
+            Some(r) => {
+                rest = r;
+                true
+            }
+            None => false,
+        };
+        let (kind, candidates) = match rest {
+            "a2c" => (AgentKind::A2c, Candidates::All),
+            "fn" => (AgentKind::Feudal, Candidates::All),
+            "wn-all" => (AgentKind::WideNarrow, Candidates::All),
+            "wn-random" => (AgentKind::WideNarrow, Candidates::Random),
+            "wn-pivotal" => (AgentKind::WideNarrow, Candidates::Pivotal),
+            _ => bail!(
+                "unknown configuration {name:?}: expected a2c, fn, fn-init or wn-<all|random|pivotal>[-trav][-init]"
+            ),
+        };
+        let c = ConfigName {
+            kind,
+            candidates,
+            traversal,
+            init,
+        };
+        let cfg = c.apply(&AgentConfig::default());
+        cfg.validate()
+            .with_context(|| format!("configuration {name:?}"))?;
+        anyhow::ensure!(
+            cfg.name() == name,
+            "configuration {name:?} is not a valid combination (it would run as {:?})",
+            cfg.name()
+        );
+        Ok(c)
+    }
+
+    /// `base` with these settings.
+    pub fn apply(&self, base: &AgentConfig) -> AgentConfig {
+        AgentConfig {
+            kind: self.kind,
+            candidates: self.candidates,
+            traversal: self.traversal,
+            init_from_gcp: self.init,
+            ..base.clone()
+        }
+    }
+
+    /// Whether the configuration needs a discovery run (its graph or `π_g`).
+    pub fn needs_discovery(&self, task: Task) -> bool {
+        let cfg = self.apply(&AgentConfig::default());
+        cfg.needs_graph() || self.init || (self.traversal && task == Task::MultiGoalStochastic)
+    }
+
+    /// The `train` arguments that select it.
+    fn train_args(&self) -> Vec<String> {
+        let mut v = vec![
+            "--agent".to_string(),
+            match self.kind {
+                AgentKind::A2c => "a2c",
+                AgentKind::Feudal => "fn",
+                AgentKind::WideNarrow => "wn",
+            }
+            .to_string(),
+            "--candidates".to_string(),
+            match self.candidates {
+                Candidates::All => "all",
+                Candidates::Random => "random",
+                Candidates::Pivotal => "pivotal",
+            }
+            .to_string(),
+            "--init".to_string(),
+            if self.init { "pi-g" } else { "none" }.to_string(),
+        ];
+        if self.traversal {
+            v.push("--traversal".to_string());
+        }
+        v
+    }
+}
+
+impl Grid {
+    /// Reads and checks a grid file.
+    pub fn read(path: &Path) -> anyhow::Result<Grid> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let g: Grid = toml::from_str(&text)
+            .with_context(|| format!("{} is not a valid experiment grid", path.display()))?;
+        g.check()
+            .with_context(|| format!("{} is not a valid experiment grid", path.display()))?;
+        Ok(g)
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            !self.name.is_empty()
+                && self
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_'),
+            "name {:?} must be letters, digits, '-' or '_'",
+            self.name
+        );
+        anyhow::ensure!(!self.seeds.is_empty(), "seeds: at least one training seed");
+        for &s in &self.seeds {
+            anyhow::ensure!(
+                s < super::train::MAX_TRAIN_SEED,
+                "seeds: {s} is not below {}",
+                super::train::MAX_TRAIN_SEED
+            );
+        }
+        anyhow::ensure!(
+            self.validation_seeds > 0 && self.test_seeds > 0,
+            "validation_seeds and test_seeds must be at least 1"
+        );
+        anyhow::ensure!(!self.maze.is_empty(), "[[maze]]: at least one maze");
+        for (i, m) in self.maze.iter().enumerate() {
+            anyhow::ensure!(
+                m.env_steps > 0 && m.eval_every > 0 && m.discover_rounds > 0,
+                "maze {}: env_steps, eval_every and discover_rounds must be at least 1",
+                m.name.name()
+            );
+            anyhow::ensure!(
+                !self.maze[..i].iter().any(|o| o.name == m.name),
+                "maze {} is listed twice",
+                m.name.name()
+            );
+        }
+        for g in &self.group {
+            anyhow::ensure!(
+                g.table == 1 || g.table == 2,
+                "group table {} (1 or 2)",
+                g.table
+            );
+            anyhow::ensure!(
+                !g.tasks.is_empty() && !g.configs.is_empty(),
+                "a group needs tasks and configs"
+            );
+            for c in &g.configs {
+                ConfigName::parse(c)?;
+            }
+            for m in &g.mazes {
+                anyhow::ensure!(
+                    self.budget(*m).is_some(),
+                    "group maze {} has no [[maze]] budget",
+                    m.name()
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The budget of `maze`.
+    pub fn budget(&self, maze: Maze) -> Option<&MazeBudget> {
+        self.maze.iter().find(|m| m.name == maze)
+    }
+
+    /// The training configuration of a run on `maze`.
+    pub fn train_config(&self, maze: Maze) -> TrainConfig {
+        let b = self.budget(maze).expect("checked maze");
+        TrainConfig {
+            env_steps: b.env_steps,
+            eval_every: b.eval_every,
+            validation_seeds: self.validation_seeds,
+            test_seeds: self.test_seeds,
+            ..TrainConfig::default()
+        }
+    }
+}
+
+/// `experiment` options.
+#[derive(Debug, Clone, Args)]
+pub struct ExperimentArgs {
+    /// The grid file (see `experiments/`).
+    #[arg(required_unless_present = "reproduce")]
+    pub grid: Option<PathBuf>,
+    /// Runs side by side [default: the machine's cores].
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// libtorch threads of each run.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    /// Where the summaries go (committed to the repository).
+    #[arg(long, default_value = "results")]
+    pub results: PathBuf,
+    /// Working directory of the runs (checkpoints, logs, discovery runs)
+    /// [default: runs/experiments/<grid name>].
+    #[arg(long)]
+    pub work: Option<PathBuf>,
+    /// Only these mazes (repeatable).
+    #[arg(long = "maze")]
+    pub mazes: Vec<Maze>,
+    /// Only these tasks (repeatable).
+    #[arg(long = "task")]
+    pub tasks: Vec<Task>,
+    /// Only these configurations (repeatable), e.g. wn-pivotal-trav-init.
+    #[arg(long = "config")]
+    pub configs: Vec<String>,
+    /// Only these training seeds (repeatable).
+    #[arg(long = "seed")]
+    pub seeds: Vec<u64>,
+    /// List the runs and what is left, and exit.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Rerun the run a summary records (discovery included) in a scratch
+    /// directory and check that it gives the same test score; exits
+    /// non-zero if not.
+    #[arg(long, value_name = "SUMMARY.json", conflicts_with = "grid")]
+    pub reproduce: Option<PathBuf>,
+}
+
+/// One run of the grid.
+#[derive(Debug, Clone)]
+enum Job {
+    /// A world graph discovery (maze, seed).
+    Discover { spec: DiscoverSpec },
+    /// A training run.
+    Train {
+        maze: Maze,
+        task: Task,
+        config: String,
+        seed: u64,
+        /// Index of the discovery it needs.
+        needs: Option<usize>,
+    },
+}
+
+struct Plan {
+    grid: Grid,
+    grid_label: String,
+    work: PathBuf,
+    results: PathBuf,
+    threads: usize,
+    jobs: usize,
+    commit: String,
+}
+
+impl Plan {
+    fn discover_dir(&self, spec: &DiscoverSpec) -> PathBuf {
+        self.work
+            .join("discover")
+            .join(format!("{}-seed-{}", spec.maze, spec.seed))
+    }
+
+    fn train_dir(&self, maze: Maze, task: Task, config: &str, seed: u64) -> PathBuf {
+        self.work
+            .join(maze.name())
+            .join(task.name())
+            .join(config)
+            .join(format!("seed-{seed}"))
+    }
+
+    fn label(job: &Job) -> String {
+        match job {
+            Job::Discover { spec } => format!("discover {} seed {}", spec.maze, spec.seed),
+            Job::Train {
+                maze,
+                task,
+                config,
+                seed,
+                ..
+            } => format!("{}/{}/{config}/seed-{seed}", maze.name(), task.name()),
+        }
+    }
+
+    fn log_path(&self, job: &Job) -> PathBuf {
+        self.work
+            .join("logs")
+            .join(format!("{}.log", Self::label(job).replace(['/', ' '], "_")))
+    }
+}
+
+/// The exe of this process (children run the same build).
+fn exe() -> anyhow::Result<PathBuf> {
+    std::env::current_exe().context("cannot find the worldgraph executable")
+}
+
+fn discover_command(plan: &Plan, spec: &DiscoverSpec) -> anyhow::Result<Command> {
+    let mut cmd = Command::new(exe()?);
+    cmd.args(["discover", "--maze", &spec.maze, "--seed"])
+        .arg(spec.seed.to_string())
+        .arg("--rounds")
+        .arg(spec.rounds.to_string())
+        .arg("--run")
+        .arg(plan.discover_dir(spec))
+        .arg("--json");
+    Ok(cmd)
+}
+
+fn train_command(
+    plan: &Plan,
+    cfg: &TrainConfig,
+    maze: Maze,
+    task: Task,
+    config: &str,
+    seed: u64,
+    graph: Option<&Path>,
+) -> anyhow::Result<Command> {
+    let dir = plan.train_dir(maze, task, config, seed);
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let cfg_file = dir.join("grid-config.toml");
+    write_atomic(
+        &cfg_file,
+        toml::to_string(cfg)?.as_bytes(),
+    )?;
+    let mut cmd = Command::new(exe()?);
+    cmd.args(["train", "--maze", maze.name(), "--task", task.name()])
+        .args(ConfigName::parse(config)?.train_args())
+        .arg("--seed")
+        .arg(seed.to_string())
+        .arg("--config")
+        .arg(&cfg_file)
+        .arg("--run")
+        .arg(&dir)
+        .arg("--json");
+    if let Some(g) = graph {
+        cmd.arg("--world-graph").arg(g);
+    }
+    Ok(cmd)
+}
+
+/// Starts `cmd` with its output in `log` (appended) and `threads` libtorch
+/// threads.
+fn start(mut cmd: Command, log: &Path, threads: usize) -> anyhow::Result<Child> {
+    if let Some(d) = log.parent() {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    let out = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .with_context(|| format!("cannot open {}", log.display()))?;
+    let err = out.try_clone()?;
+    cmd.stdin(Stdio::null())
+        .stdout(out)
+        .stderr(err)
+        .env("WORLDGRAPH_TORCH_THREADS", threads.to_string())
+        .spawn()
+        .context("cannot start a run")
+}
+
+/// The last lines of a log, for a failure report.
+fn tail(log: &Path, lines: usize) -> String {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let v: Vec<&str> = text.lines().collect();
+    v[v.len().saturating_sub(lines)..].join("\n")
+}
+
+/// A finished discovery's summary, if its run directory has one for these
+/// rounds.
+fn discovery_done(dir: &Path, spec: &DiscoverSpec) -> Option<serde_json::Value> {
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("discovery.json")).ok()?).ok()?;
+    (v.get("rounds")?.as_u64()? == u64::from(spec.rounds) && dir.join("graph.json").exists())
+        .then_some(v)
+}
+
+/// Writes a finished job's summary under `results/`.
+fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
+    match job {
+        Job::Discover { spec } => {
+            let dir = plan.discover_dir(spec);
+            let summary = discovery_done(&dir, spec).with_context(|| {
+                format!("{} finished without its summary", dir.display())
+            })?;
+            let r = DiscoverResult {
+                schema: RESULT_SCHEMA,
+                spec: spec.clone(),
+                grid: plan.grid_label.clone(),
+                summary,
+                commit: plan.commit.clone(),
+            };
+            let path = discover_path(&plan.results, &spec.maze, spec.seed);
+            write_result(&path, &serde_json::to_vec_pretty(&r)?)
+        }
+        Job::Train {
+            maze,
+            task,
+            config,
+            seed,
+            needs,
+        } => {
+            let dir = plan.train_dir(*maze, *task, config, *seed);
+            let t: TestSummary = serde_json::from_slice(
+                &std::fs::read(dir.join("test.json"))
+                    .with_context(|| format!("{} finished without test.json", dir.display()))?,
+            )?;
+            let train_config: TrainConfig = toml::from_str(
+                &std::fs::read_to_string(dir.join("config.toml"))
+                    .with_context(|| format!("cannot read {}/config.toml", dir.display()))?,
+            )?;
+            let discover = needs.map(|_| DiscoverSpec {
+                maze: maze.name().to_string(),
+                seed: *seed,
+                rounds: plan.grid.budget(*maze).expect("checked").discover_rounds,
+            });
+            let r = run_result(plan, *maze, *task, config, *seed, train_config, discover, &t);
+            let path = run_path(&plan.results, maze.name(), task.name(), config, *seed);
+            write_result(&path, &serde_json::to_vec_pretty(&r)?)
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_result(
+    plan: &Plan,
+    maze: Maze,
+    task: Task,
+    config: &str,
+    seed: u64,
+    train_config: TrainConfig,
+    discover: Option<DiscoverSpec>,
+    t: &TestSummary,
+) -> RunResult {
+    RunResult {
+        schema: RESULT_SCHEMA,
+        maze: maze.name().to_string(),
+        task: task.name().to_string(),
+        config: config.to_string(),
+        seed,
+        grid: plan.grid_label.clone(),
+        train_config,
+        discover,
+        validation_stream: t.validation_stream,
+        validation_seeds: t.validation_seeds,
+        test_stream: t.test_stream,
+        test_seeds: t.test_seeds,
+        test_score: t.test_score,
+        test_return: t.test_return,
+        test_success_rate: t.test_success_rate,
+        best_validation: t.best_validation,
+        best_env_steps: t.best_env_steps,
+        validation_curve: t
+            .validation_curve
+            .iter()
+            .enumerate()
+            .map(|(i, &(env_steps, score))| CurvePoint {
+                env_steps,
+                wall_seconds: t.validation_wall_seconds.get(i).copied().unwrap_or(f64::NAN),
+                score,
+            })
+            .collect(),
+        env_steps: t.env_steps,
+        wall_seconds: t.wall_seconds,
+        train_steps_per_sec: t.train_steps_per_sec,
+        torch_threads: plan.threads,
+        jobs: plan.jobs,
+        commit: plan.commit.clone(),
+    }
+}
+
+fn write_result(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    if let Some(d) = path.parent() {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    write_atomic(path, bytes)?;
+    Ok(())
+}
+
+/// The grid's runs that match the filters: discoveries first, then the
+/// training runs cell by cell (all seeds of a cell together, so a stopped
+/// grid leaves whole cells).
+fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
+    for c in &a.configs {
+        ConfigName::parse(c)?;
+    }
+    let keep_maze = |m: Maze| a.mazes.is_empty() || a.mazes.contains(&m);
+    let keep_seed = |s: u64| a.seeds.is_empty() || a.seeds.contains(&s);
+    let mut discover: HashMap<(Maze, u64), usize> = HashMap::new();
+    let mut out = Vec::new();
+    let mut train = Vec::new();
+    for g in &grid.group {
+        let mazes: Vec<Maze> = if g.mazes.is_empty() {
+            grid.maze.iter().map(|m| m.name).collect()
+        } else {
+            g.mazes.clone()
+        };
+        for maze in mazes.into_iter().filter(|&m| keep_maze(m)) {
+            for &task in g.tasks.iter().filter(|t| a.tasks.is_empty() || a.tasks.contains(t)) {
+                for config in g
+                    .configs
+                    .iter()
+                    .filter(|c| a.configs.is_empty() || a.configs.contains(c))
+                {
+                    let needs_graph = ConfigName::parse(config)?.needs_discovery(task);
+                    for &seed in grid.seeds.iter().filter(|&&s| keep_seed(s)) {
+                        let needs = needs_graph.then(|| {
+                            *discover.entry((maze, seed)).or_insert_with(|| {
+                                out.push(Job::Discover {
+                                    spec: DiscoverSpec {
+                                        maze: maze.name().to_string(),
+                                        seed,
+                                        rounds: grid.budget(maze).expect("checked").discover_rounds,
+                                    },
+                                });
+                                out.len() - 1
+                            })
+                        });
+                        train.push(Job::Train {
+                            maze,
+                            task,
+                            config: config.clone(),
+                            seed,
+                            needs,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out.extend(train);
+    Ok(out)
+}
+
+/// Set on SIGINT, SIGTERM or SIGHUP: stop the children and exit.
+fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [
+        signal_hook::consts::SIGINT,
+        signal_hook::consts::SIGTERM,
+        signal_hook::consts::SIGHUP,
+    ] {
+        signal_hook::flag::register(sig, Arc::clone(&stop))?;
+    }
+    Ok(stop)
+}
+
+/// Runs `worldgraph experiment`.
+pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
+    if let Some(summary) = &a.reproduce {
+        return reproduce(summary, &a);
+    }
+    let grid_path = a.grid.clone().expect("clap: grid or --reproduce");
+    let grid = Grid::read(&grid_path)?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let plan = Plan {
+        work: a
+            .work
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("runs/experiments").join(&grid.name)),
+        results: a.results.clone(),
+        threads: a.threads.max(1),
+        jobs: a.jobs.unwrap_or((cores / a.threads.max(1)).max(1)).max(1),
+        commit: current_commit(),
+        grid_label: grid_path.display().to_string(),
+        grid,
+    };
+    let all = jobs(&plan.grid, &a)?;
+    // What is already done: a summary under results/ (training), or a
+    // finished discovery in the working directory.
+    let mut finished = vec![false; all.len()];
+    for (i, j) in all.iter().enumerate() {
+        finished[i] = match j {
+            Job::Discover { spec } => discovery_done(&plan.discover_dir(spec), spec).is_some(),
+            Job::Train {
+                maze,
+                task,
+                config,
+                seed,
+                ..
+            } => run_path(&plan.results, maze.name(), task.name(), config, *seed).exists(),
+        };
+    }
+    // A discovery is needed only by training runs still to do.
+    let needed: Vec<bool> = (0..all.len())
+        .map(|i| match &all[i] {
+            Job::Discover { .. } => all.iter().enumerate().any(|(k, j)| {
+                matches!(j, Job::Train { needs: Some(n), .. } if *n == i) && !finished[k]
+            }),
+            Job::Train { .. } => true,
+        })
+        .collect();
+    let trains = all
+        .iter()
+        .filter(|j| matches!(j, Job::Train { .. }))
+        .count();
+    let trains_done = all
+        .iter()
+        .zip(&finished)
+        .filter(|(j, f)| matches!(j, Job::Train { .. }) && **f)
+        .count();
+    let mut queue: VecDeque<usize> = (0..all.len())
+        .filter(|&i| !finished[i] && needed[i])
+        .collect();
+    eprintln!(
+        "experiment {}: {} training runs ({} done, {} to run), {} discoveries to run; {} side by side, {} libtorch thread(s) each; work in {}, results in {}",
+        plan.grid.name,
+        trains,
+        trains_done,
+        trains - trains_done,
+        queue
+            .iter()
+            .filter(|&&i| matches!(all[i], Job::Discover { .. }))
+            .count(),
+        plan.jobs,
+        plan.threads,
+        plan.work.display(),
+        plan.results.display()
+    );
+    if a.dry_run {
+        for &i in &queue {
+            println!("{}", Plan::label(&all[i]));
+        }
+        return Ok(std::process::ExitCode::SUCCESS);
+    }
+
+    let stop = stop_flag()?;
+    let bar = crate::progress::bar(queue.len() as u64, "experiment");
+    let mut running: Vec<(usize, Child, Instant)> = Vec::new();
+    let mut failed: Vec<(usize, String)> = Vec::new();
+    let mut done_now = 0usize;
+    let is_failed = |failed: &Vec<(usize, String)>, i: usize| failed.iter().any(|(k, _)| *k == i);
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            for (_, child, _) in &mut running {
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(child.id() as i32),
+                    nix::sys::signal::Signal::SIGTERM,
+                );
+            }
+            for (_, child, _) in &mut running {
+                let _ = child.wait();
+            }
+            bar.finish_and_clear();
+            bail!(
+                "stopped: {} runs finished this time; the rest resume from their checkpoints on the next start",
+                done_now
+            );
+        }
+        // Reap.
+        let mut k = 0;
+        while k < running.len() {
+            let (i, child, started) = &mut running[k];
+            match child.try_wait()? {
+                None => k += 1,
+                Some(status) => {
+                    let i = *i;
+                    let secs = started.elapsed().as_secs_f64();
+                    let job = &all[i];
+                    let outcome = if status.success() {
+                        record(&plan, job)
+                    } else {
+                        Err(anyhow::anyhow!(
+                            "{status}; the end of {}:\n{}",
+                            plan.log_path(job).display(),
+                            tail(&plan.log_path(job), 6)
+                        ))
+                    };
+                    match outcome {
+                        Ok(()) => {
+                            finished[i] = true;
+                            done_now += 1;
+                            crate::progress::note(
+                                &bar,
+                                &format!("done {} ({secs:.0} s){}", Plan::label(job), score_note(&plan, job)),
+                            );
+                        }
+                        Err(e) => {
+                            crate::progress::note(
+                                &bar,
+                                &format!("FAILED {}: {e:#}", Plan::label(job)),
+                            );
+                            failed.push((i, format!("{e:#}")));
+                        }
+                    }
+                    bar.inc(1);
+                    running.swap_remove(k);
+                }
+            }
+        }
+        // Launch what is ready.
+        let mut k = 0;
+        while running.len() < plan.jobs && k < queue.len() {
+            let i = queue[k];
+            let ready = match &all[i] {
+                Job::Discover { .. } => Some(None),
+                Job::Train { needs: None, .. } => Some(None),
+                Job::Train { needs: Some(n), .. } if finished[*n] => {
+                    let Job::Discover { spec } = &all[*n] else {
+                        unreachable!("needs points at a discovery")
+                    };
+                    Some(Some(std::fs::canonicalize(plan.discover_dir(spec))?))
+                }
+                Job::Train { needs: Some(n), .. } if is_failed(&failed, *n) => {
+                    failed.push((i, format!("its discovery ({}) failed", Plan::label(&all[*n]))));
+                    bar.inc(1);
+                    queue.remove(k);
+                    continue;
+                }
+                Job::Train { .. } => None,
+            };
+            let Some(graph) = ready else {
+                k += 1;
+                continue;
+            };
+            let cmd = match &all[i] {
+                Job::Discover { spec } => discover_command(&plan, spec)?,
+                Job::Train {
+                    maze,
+                    task,
+                    config,
+                    seed,
+                    ..
+                } => train_command(
+                    &plan,
+                    &plan.grid.train_config(*maze),
+                    *maze,
+                    *task,
+                    config,
+                    *seed,
+                    graph.as_deref(),
+                )?,
+            };
+            let child = start(cmd, &plan.log_path(&all[i]), plan.threads)?;
+            running.push((i, child, Instant::now()));
+            queue.remove(k);
+        }
+        if running.is_empty() && queue.is_empty() {
+            break;
+        }
+        let names: Vec<String> = running.iter().map(|(i, _, _)| Plan::label(&all[*i])).collect();
+        bar.set_message(format!(
+            "done {done_now}, running {} [{}], left {}, failed {}",
+            running.len(),
+            names.join(", "),
+            queue.len(),
+            failed.len()
+        ));
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    bar.finish_and_clear();
+    eprintln!(
+        "experiment {}: {} runs finished, {} failed; `worldgraph table {}` renders the tables",
+        plan.grid.name,
+        done_now,
+        failed.len(),
+        plan.results.display()
+    );
+    for (i, e) in &failed {
+        eprintln!("  failed {}: {e}", Plan::label(&all[*i]));
+    }
+    Ok(if failed.is_empty() {
+        std::process::ExitCode::SUCCESS
+    } else {
+        std::process::ExitCode::FAILURE
+    })
+}
+
+fn score_note(plan: &Plan, job: &Job) -> String {
+    match job {
+        Job::Train {
+            maze,
+            task,
+            config,
+            seed,
+            ..
+        } => read_run(&run_path(
+            &plan.results,
+            maze.name(),
+            task.name(),
+            config,
+            *seed,
+        ))
+        .map(|r| {
+            format!(
+                ": test {:.3}, best validation {:.3}, {} env steps",
+                r.test_score, r.best_validation, r.env_steps
+            )
+        })
+        .unwrap_or_default(),
+        Job::Discover { .. } => String::new(),
+    }
+}
+
+/// `--reproduce`: reruns one recorded run in a scratch working directory.
+fn reproduce(summary: &Path, a: &ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
+    let r = read_run(summary)?;
+    let maze: Maze = r
+        .maze
+        .parse()
+        .map_err(|e| anyhow::anyhow!("{}: maze {:?}: {e}", summary.display(), r.maze))?;
+    let task: Task = r
+        .task
+        .parse()
+        .map_err(|e| anyhow::anyhow!("{}: task {:?}: {e}", summary.display(), r.task))?;
+    let work = a.work.clone().unwrap_or_else(|| {
+        PathBuf::from("runs/reproduce").join(format!("{}-{}-{}-seed-{}", r.maze, r.task, r.config, r.seed))
+    });
+    let grid = Grid {
+        name: "reproduce".to_string(),
+        seeds: vec![r.seed],
+        validation_seeds: r.validation_seeds,
+        test_seeds: r.test_seeds,
+        maze: vec![MazeBudget {
+            name: maze,
+            env_steps: r.train_config.env_steps,
+            eval_every: r.train_config.eval_every,
+            discover_rounds: r.discover.as_ref().map_or(1, |d| d.rounds),
+        }],
+        group: Vec::new(),
+    };
+    let plan = Plan {
+        grid,
+        grid_label: r.grid.clone(),
+        work: work.clone(),
+        results: work.join("results"),
+        threads: r.torch_threads,
+        jobs: 1,
+        commit: current_commit(),
+    };
+    let graph = match &r.discover {
+        Some(spec) => {
+            let dir = plan.discover_dir(spec);
+            if discovery_done(&dir, spec).is_none() {
+                eprintln!("reproduce: discovering the world graph ({} rounds)", spec.rounds);
+                let job = Job::Discover { spec: spec.clone() };
+                wait_ok(start(discover_command(&plan, spec)?, &plan.log_path(&job), plan.threads)?, &plan.log_path(&job))?;
+            }
+            Some(std::fs::canonicalize(&dir)?)
+        }
+        None => None,
+    };
+    eprintln!("reproduce: training {} in {}", Plan::label(&Job::Train { maze, task, config: r.config.clone(), seed: r.seed, needs: None }), work.display());
+    let job = Job::Train {
+        maze,
+        task,
+        config: r.config.clone(),
+        seed: r.seed,
+        needs: r.discover.as_ref().map(|_| 0),
+    };
+    wait_ok(
+        start(
+            train_command(
+                &plan,
+                &r.train_config,
+                maze,
+                task,
+                &r.config,
+                r.seed,
+                graph.as_deref(),
+            )?,
+            &plan.log_path(&job),
+            plan.threads,
+        )?,
+        &plan.log_path(&job),
+    )?;
+    let dir = plan.train_dir(maze, task, &r.config, r.seed);
+    let t: TestSummary = serde_json::from_slice(&std::fs::read(dir.join("test.json"))?)?;
+    println!(
+        "recorded test score {:.6} (commit {}), reproduced {:.6} (commit {})",
+        r.test_score, r.commit, t.test_score, plan.commit
+    );
+    if t.test_score == r.test_score {
+        println!("reproduced: the same test score");
+        Ok(std::process::ExitCode::SUCCESS)
+    } else {
+        eprintln!("error: the rerun's test score differs from the summary's");
+        Ok(std::process::ExitCode::FAILURE)
+    }
+}
+
+fn wait_ok(mut child: Child, log: &Path) -> anyhow::Result<()> {
+    let status = child.wait()?;
+    anyhow::ensure!(
+        status.success(),
+        "{status}; the end of {}:\n{}",
+        log.display(),
+        tail(log, 6)
+    );
+    Ok(())
+}

@@ -1,0 +1,510 @@
+//! `worldgraph table results/`: the committed run summaries as the paper's
+//! Tables 1 and 2 (section 5), each cell mean ± std over the training seeds
+//! with the paper's value beside it, the budget every cell used, the time
+//! each configuration took to reach a score, and validation curves like
+//! the paper's Figure 4 (mean and spread over seeds), into
+//! `docs/results.md` and `docs/figures/`.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use sim::chart::{LineChart, Series, XScale};
+use sim::render::write_atomic;
+
+use crate::results::{RunResult, read_all_runs};
+
+/// `table` options.
+#[derive(Debug, Clone, Args)]
+pub struct TableArgs {
+    /// The results directory (`results/<maze>/<task>/<config>/seed-<n>.json`).
+    #[arg(default_value = "results")]
+    pub results: PathBuf,
+    /// The Markdown file written.
+    #[arg(long, default_value = "docs/results.md")]
+    pub out: PathBuf,
+    /// Directory of the figures (linked from the Markdown file relative to
+    /// it) [default: `figures/` beside --out].
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Time to score: the threshold per maze and task, as a share of the
+    /// best validation score any configuration reached there.
+    #[arg(long, default_value_t = 0.9)]
+    pub threshold: f64,
+}
+
+/// Table 1's rows, in the paper's order.
+pub const TABLE1_CONFIGS: [&str; 10] = [
+    "a2c",
+    "fn",
+    "fn-init",
+    "wn-all-init",
+    "wn-random-init",
+    "wn-pivotal-init",
+    "wn-random-trav",
+    "wn-pivotal-trav",
+    "wn-random-trav-init",
+    "wn-pivotal-trav-init",
+];
+
+/// Table 1's tasks.
+pub const TABLE1_TASKS: [&str; 3] = ["multigoal", "multigoal-sparse", "multigoal-stochastic"];
+
+/// Table 2's columns, in the paper's order.
+pub const TABLE2_CONFIGS: [&str; 7] = [
+    "wn-all-init",
+    "wn-random-init",
+    "wn-pivotal-init",
+    "wn-random-trav",
+    "wn-pivotal-trav",
+    "wn-random-trav-init",
+    "wn-pivotal-trav-init",
+];
+
+const MAZES: [&str; 3] = ["small", "medium", "large"];
+
+/// The paper's Table 1 (mean reward after 100k training iterations; `None`
+/// is "Fail"): rows [`TABLE1_CONFIGS`], columns task-major over
+/// [`TABLE1_TASKS`] × small, medium, large.
+const PAPER_TABLE1: [[Option<f64>; 9]; 10] = {
+    const F: Option<f64> = None;
+    const fn v(x: f64) -> Option<f64> {
+        Some(x)
+    }
+    [
+        [v(2.04), F, F, v(-0.10), F, F, v(1.38), F, F],
+        [F, F, F, v(0.19), F, F, F, F, F],
+        [v(2.93), F, F, F, F, F, v(1.93), F, F],
+        [v(4.73), v(4.71), F, v(0.32), F, F, v(2.59), v(1.62), F],
+        [v(3.67), v(4.72), F, v(0.36), F, F, v(2.82), F, F],
+        [v(5.25), v(5.15), F, v(0.39), F, F, v(3.06), v(2.99), F],
+        [v(3.85), v(2.59), v(1.65), v(0.17), v(0.19), v(0.20), F, v(1.67), F],
+        [v(3.92), v(2.56), v(2.18), v(0.24), v(0.20), v(0.16), F, v(2.42), v(1.05)],
+        [v(4.16), v(3.29), v(2.30), v(0.25), v(0.24), v(0.19), v(2.72), v(2.42), v(1.93)],
+        [v(5.05), v(3.00), v(2.72), v(0.42), v(0.25), v(0.26), v(2.92), v(2.62), v(1.79)],
+    ]
+};
+
+/// The paper's Table 2 (Door-Key success rate in %, mean and std; `None`
+/// is "Fail"): rows small, medium, large; columns [`TABLE2_CONFIGS`].
+const PAPER_TABLE2: [[Option<(f64, f64)>; 7]; 3] = {
+    const F: Option<(f64, f64)> = None;
+    const fn v(m: f64, s: f64) -> Option<(f64, f64)> {
+        Some((m, s))
+    }
+    [
+        [v(94., 5.), v(97., 2.), v(99., 0.), F, v(37., 15.), v(76., 14.), v(92., 2.)],
+        [v(25., 15.), v(1., 1.), v(56., 2.), F, F, v(79., 11.), v(76., 6.)],
+        [F, F, F, F, F, v(27., 40.), v(26., 19.)],
+    ]
+};
+
+/// The paper's budget: 100k training iterations of 32 agents.
+const PAPER_ITERATIONS: u64 = 100_000;
+
+/// The runs of one cell (maze, task, configuration), one per seed.
+type Cells<'a> = BTreeMap<(String, String, String), Vec<&'a RunResult>>;
+
+fn mean_std(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let m = xs.iter().sum::<f64>() / n;
+    let v = if xs.len() > 1 {
+        xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    (m, v.sqrt())
+}
+
+/// A cell: mean ± std of the test scores (×`scale`), "Fail" when every
+/// seed failed by the paper's rule, the seed count when not the grid's 3
+/// and how many seeds failed.
+fn cell_text(runs: Option<&Vec<&RunResult>>, scale: f64, digits: usize) -> String {
+    let Some(runs) = runs.filter(|r| !r.is_empty()) else {
+        return "—".to_string();
+    };
+    let fails = runs.iter().filter(|r| r.failed()).count();
+    if fails == runs.len() {
+        return format!("Fail ({} seeds)", runs.len());
+    }
+    let scores: Vec<f64> = runs.iter().map(|r| r.test_score * scale).collect();
+    let (m, s) = mean_std(&scores);
+    let mut t = format!("{m:.digits$} ± {s:.digits$}");
+    if runs.len() != 3 {
+        let _ = write!(t, " (n={})", runs.len());
+    }
+    if fails > 0 {
+        let _ = write!(t, " ({fails} fail)");
+    }
+    t
+}
+
+fn paper1(config: &str, task: &str, maze: &str) -> String {
+    let r = TABLE1_CONFIGS.iter().position(|c| *c == config);
+    let t = TABLE1_TASKS.iter().position(|c| *c == task);
+    let m = MAZES.iter().position(|c| *c == maze);
+    match (r, t, m) {
+        (Some(r), Some(t), Some(m)) => match PAPER_TABLE1[r][t * 3 + m] {
+            Some(v) => format!("{v:.2}"),
+            None => "Fail".to_string(),
+        },
+        _ => "—".to_string(),
+    }
+}
+
+fn paper2(config: &str, maze: &str) -> String {
+    let c = TABLE2_CONFIGS.iter().position(|x| *x == config);
+    let m = MAZES.iter().position(|x| *x == maze);
+    match (c, m) {
+        (Some(c), Some(m)) => match PAPER_TABLE2[m][c] {
+            Some((v, s)) => format!("{v:.0} ± {s:.0}"),
+            None => "Fail".to_string(),
+        },
+        _ => "—".to_string(),
+    }
+}
+
+/// Time to score of one run: the first validation point at or above
+/// `threshold` (env steps, wall seconds).
+fn first_reach(r: &RunResult, threshold: f64) -> Option<(u64, f64)> {
+    r.validation_curve
+        .iter()
+        .find(|p| p.score >= threshold)
+        .map(|p| (p.env_steps, p.wall_seconds))
+}
+
+/// Runs `worldgraph table`.
+pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
+    let runs = read_all_runs(&a.results)?;
+    anyhow::ensure!(
+        !runs.is_empty(),
+        "no run summaries under {} (`worldgraph experiment GRID.toml` writes them)",
+        a.results.display()
+    );
+    anyhow::ensure!(
+        a.threshold > 0.0 && a.threshold <= 1.0,
+        "--threshold must be in (0, 1]"
+    );
+    let out_dir = a.out.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let figures = a.figures.clone().unwrap_or_else(|| out_dir.join("figures"));
+    std::fs::create_dir_all(&figures)
+        .with_context(|| format!("cannot create {}", figures.display()))?;
+    let fig_link = pathdiff(&figures, &out_dir);
+    let mut cells: Cells = BTreeMap::new();
+    for r in &runs {
+        cells
+            .entry((r.maze.clone(), r.task.clone(), r.config.clone()))
+            .or_default()
+            .push(r);
+    }
+    let mazes: Vec<&str> = MAZES
+        .iter()
+        .copied()
+        .filter(|m| runs.iter().any(|r| r.maze == *m))
+        .collect();
+    let mut md = String::new();
+    let commits: std::collections::BTreeSet<&str> =
+        runs.iter().map(|r| r.commit.as_str()).collect();
+    let _ = writeln!(
+        md,
+        "# Results: the paper's Tables 1 and 2 on this machine\n\n\
+         Generated by `worldgraph table {}` from the {} run summaries under `{}/` \
+         (written by `worldgraph experiment`, grids in `experiments/`); do not edit by hand.\n",
+        a.results.display(),
+        runs.len(),
+        a.results.display()
+    );
+    let _ = writeln!(
+        md,
+        "**Protocol** (section 5): every run trains on its own seed; validation on {} seeds \
+         (environments of stream {}) every `eval_every` env steps keeps the best checkpoint, \
+         which is scored on {} held-out test seeds (stream {}). A cell is the mean ± std \
+         (sample std) of the test score over the training seeds (3 unless `n=` says otherwise). \
+         **Fail** is the paper's rule: the validation score never rose above 0, in every seed \
+         of the cell; `(k fail)` counts the seeds that failed in a cell that did not. \
+         MultiGoal tasks report the mean test reward, Door-Key the success rate in %. \
+         `—`: not run yet. The paper's values are its Tables 1 and 2 (mean reward, or \
+         success rate ± std, after 100k training iterations).\n",
+        runs[0].validation_seeds,
+        runs[0].validation_stream,
+        runs[0].test_seeds,
+        runs[0].test_stream
+    );
+    let _ = writeln!(
+        md,
+        "Runs were made on the commit(s) {}.\n",
+        commits
+            .iter()
+            .map(|c| format!("`{}`", &c[..c.len().min(12)]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+
+    // Budgets.
+    let _ = writeln!(md, "## Budgets\n");
+    let _ = writeln!(
+        md,
+        "| maze | env steps per run | validation every | runs | mean wall s per run | mean training env-steps/s | share of the paper's budget |\n|---|---:|---:|---:|---:|---:|---:|"
+    );
+    for m in &mazes {
+        let rs: Vec<&RunResult> = runs.iter().filter(|r| r.maze == *m).collect();
+        let steps: std::collections::BTreeSet<u64> =
+            rs.iter().map(|r| r.train_config.env_steps).collect();
+        let every: std::collections::BTreeSet<u64> =
+            rs.iter().map(|r| r.train_config.eval_every).collect();
+        let wall = rs.iter().map(|r| r.wall_seconds).sum::<f64>() / rs.len() as f64;
+        let sps = rs.iter().map(|r| r.train_steps_per_sec).sum::<f64>() / rs.len() as f64;
+        let paper_steps = PAPER_ITERATIONS
+            * (rs[0].train_config.agent.envs * rs[0].train_config.agent.rollout_len) as u64;
+        let _ = writeln!(
+            md,
+            "| {m} | {} | {} | {} | {wall:.0} | {sps:.0} | {:.3} % |",
+            join(&steps),
+            join(&every),
+            rs.len(),
+            100.0 * *steps.iter().max().expect("runs") as f64 / paper_steps as f64
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nThe paper's budget is taken as 100k iterations × {} agents × a rollout of {} steps \
+         (this repository's rollout; the paper's main text does not state its own). Wall times \
+         are on the 2-core machine with `jobs` runs side by side (each summary records it).\n",
+        runs[0].train_config.agent.envs,
+        runs[0].train_config.agent.rollout_len
+    );
+
+    // Table 1.
+    let t1_tasks: Vec<&str> = TABLE1_TASKS
+        .iter()
+        .copied()
+        .filter(|t| runs.iter().any(|r| r.task == *t))
+        .collect();
+    if !t1_tasks.is_empty() {
+        let _ = writeln!(md, "## Table 1: MultiGoal, MultiGoal-Sparse, MultiGoal-Stochastic (mean test reward)\n");
+        for t in &t1_tasks {
+            let _ = writeln!(md, "### {t}\n");
+            let mut head = "| configuration |".to_string();
+            let mut rule = "|---|".to_string();
+            for m in &mazes {
+                let _ = write!(head, " {m} | paper |");
+                rule.push_str("---:|---:|");
+            }
+            let _ = writeln!(md, "{head}\n{rule}");
+            for c in TABLE1_CONFIGS {
+                let mut line = format!("| {} |", display_config(c));
+                for m in &mazes {
+                    let k = (m.to_string(), t.to_string(), c.to_string());
+                    let _ = write!(line, " {} | {} |", cell_text(cells.get(&k), 1.0, 3), paper1(c, t, m));
+                }
+                let _ = writeln!(md, "{line}");
+            }
+            let _ = writeln!(md);
+        }
+    }
+
+    // Table 2.
+    if runs.iter().any(|r| r.task == "doorkey") {
+        let _ = writeln!(md, "## Table 2: Door-Key (test success rate, %)\n");
+        let mut head = "| maze |".to_string();
+        let mut rule = "|---|".to_string();
+        for c in TABLE2_CONFIGS {
+            let _ = write!(head, " {} | paper |", display_config(c));
+            rule.push_str("---:|---:|");
+        }
+        let _ = writeln!(md, "{head}\n{rule}");
+        for m in &mazes {
+            let mut line = format!("| {m} |");
+            for c in TABLE2_CONFIGS {
+                let k = (m.to_string(), "doorkey".to_string(), c.to_string());
+                let _ = write!(line, " {} | {} |", cell_text(cells.get(&k), 100.0, 0), paper2(c, m));
+            }
+            let _ = writeln!(md, "{line}");
+        }
+        let _ = writeln!(md);
+    }
+
+    // Time to score.
+    let _ = writeln!(
+        md,
+        "## Time to score\n\n\
+         For each maze and task the threshold is {:.0} % of the best validation score any \
+         configuration reached there; a seed's time to score is the env steps (and training wall \
+         seconds) at its first validation at or above it. `k/n` seeds reached it; mean ± std are \
+         over those k. The figures plot the share of seeds that reached the threshold against env \
+         steps.\n",
+        100.0 * a.threshold
+    );
+    let _ = writeln!(
+        md,
+        "| maze | task | threshold | configuration | reached | env steps | wall s |\n|---|---|---:|---|---:|---:|---:|"
+    );
+    let mut pairs: Vec<(String, String)> = cells.keys().map(|(m, t, _)| (m.clone(), t.clone())).collect();
+    pairs.dedup();
+    for (m, t) in &pairs {
+        let best = runs
+            .iter()
+            .filter(|r| &r.maze == m && &r.task == t)
+            .map(|r| r.best_validation)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if best <= 0.0 {
+            let _ = writeln!(md, "| {m} | {t} | — | every configuration | 0 | — | — |");
+            continue;
+        }
+        let threshold = a.threshold * best;
+        let mut reach_series = Vec::new();
+        for ((cm, ct, c), rs) in cells.iter().filter(|((cm, ct, _), _)| cm == m && ct == t) {
+            let _ = (cm, ct);
+            let reached: Vec<(u64, f64)> = rs.iter().filter_map(|r| first_reach(r, threshold)).collect();
+            let (steps, wall) = if reached.is_empty() {
+                ("—".to_string(), "—".to_string())
+            } else {
+                let (sm, ss) = mean_std(&reached.iter().map(|x| x.0 as f64).collect::<Vec<_>>());
+                let (wm, ws) = mean_std(&reached.iter().map(|x| x.1).collect::<Vec<_>>());
+                (format!("{sm:.0} ± {ss:.0}"), format!("{wm:.0} ± {ws:.0}"))
+            };
+            let _ = writeln!(
+                md,
+                "| {m} | {t} | {threshold:.3} | {} | {}/{} | {steps} | {wall} |",
+                display_config(c),
+                reached.len(),
+                rs.len()
+            );
+            // Share of seeds at the threshold against env steps.
+            let mut xs: Vec<u64> = rs
+                .iter()
+                .flat_map(|r| r.validation_curve.iter().map(|p| p.env_steps))
+                .collect();
+            xs.sort_unstable();
+            xs.dedup();
+            reach_series.push(Series {
+                name: c.clone(),
+                points: xs
+                    .iter()
+                    .map(|&x| {
+                        let k = reached.iter().filter(|r| r.0 <= x).count();
+                        (x as f64, k as f64 / rs.len() as f64)
+                    })
+                    .collect(),
+            });
+        }
+        let file = format!("time-to-score-{m}-{t}.png");
+        LineChart {
+            title: format!("{m} {t}: seeds at {:.0} % of the best ({threshold:.2})", 100.0 * a.threshold),
+            x_label: "env steps".into(),
+            y_label: "share of seeds".into(),
+            series: reach_series,
+            x_scale: XScale::Linear,
+        }
+        .render(900, 520)
+        .save_png(&figures.join(&file))?;
+    }
+    let _ = writeln!(md);
+    for (m, t) in &pairs {
+        let file = format!("time-to-score-{m}-{t}.png");
+        if figures.join(&file).exists() {
+            let _ = writeln!(md, "![time to score, {m} {t}]({fig_link}/{file})");
+        }
+    }
+    let _ = writeln!(md);
+
+    // Figure 4.
+    let _ = writeln!(
+        md,
+        "## Validation curves (the paper's Figure 4)\n\n\
+         Validation score against env steps, mean over seeds with the band of ± one std: \
+         `V_p` against `V_rand`, with and without traversal and `π_g` initialisation.\n"
+    );
+    for (m, t) in &pairs {
+        let groups: [(&str, [&str; 2]); 3] = [
+            ("init", ["wn-random-init", "wn-pivotal-init"]),
+            ("trav", ["wn-random-trav", "wn-pivotal-trav"]),
+            ("trav-init", ["wn-random-trav-init", "wn-pivotal-trav-init"]),
+        ];
+        let mut series = Vec::new();
+        for (_, pair) in groups {
+            for c in pair {
+                if let Some(rs) = cells.get(&(m.clone(), t.clone(), c.to_string())) {
+                    series.push(mean_curve(c, rs));
+                }
+            }
+        }
+        if series.is_empty() {
+            continue;
+        }
+        let file = format!("fig4-{m}-{t}.png");
+        LineChart {
+            title: format!("{m} {t}: validation score, V_p against V_rand"),
+            x_label: "env steps".into(),
+            y_label: "validation score".into(),
+            series,
+            x_scale: XScale::Linear,
+        }
+        .render(900, 520)
+        .save_png(&figures.join(&file))?;
+        let _ = writeln!(md, "![validation curves, {m} {t}]({fig_link}/{file})\n");
+    }
+    write_atomic(&a.out, md.as_bytes())?;
+    eprintln!(
+        "table: {} runs in {} cells → {} (figures in {})",
+        runs.len(),
+        cells.len(),
+        a.out.display(),
+        figures.display()
+    );
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// The mean validation curve of a cell's seeds, at the env steps all of
+/// them reached.
+fn mean_curve(name: &str, rs: &[&RunResult]) -> Series {
+    let len = rs.iter().map(|r| r.validation_curve.len()).min().unwrap_or(0);
+    Series {
+        name: format!("{name} (n={})", rs.len()),
+        points: (0..len)
+            .map(|i| {
+                let ys: Vec<f64> = rs.iter().map(|r| r.validation_curve[i].score).collect();
+                (rs[0].validation_curve[i].env_steps as f64, mean_std(&ys).0)
+            })
+            .collect(),
+    }
+}
+
+/// The paper's names for the configurations.
+fn display_config(c: &str) -> String {
+    match c {
+        "a2c" => "A2C".into(),
+        "fn" => "FN".into(),
+        "fn-init" => "FN + π_g init".into(),
+        _ => {
+            let set = if c.starts_with("wn-all") {
+                "V_all"
+            } else if c.starts_with("wn-random") {
+                "V_rand"
+            } else {
+                "V_p"
+            };
+            let mut s = format!("WN {set}");
+            if c.contains("-trav") {
+                s.push_str(" + traversal");
+            }
+            if c.ends_with("-init") {
+                s.push_str(" + π_g init");
+            }
+            s
+        }
+    }
+}
+
+fn join(xs: &std::collections::BTreeSet<u64>) -> String {
+    xs.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
+}
+
+/// `to` relative to `from` when it lies below it, else `to` as given.
+fn pathdiff(to: &Path, from: &Path) -> String {
+    to.strip_prefix(from)
+        .map(|p| p.display().to_string())
+        .unwrap_or_else(|_| to.display().to_string())
+}

@@ -1,0 +1,200 @@
+//! The committed results of the paper's experiments (section 5): one small
+//! JSON summary per finished run under
+//! `results/<maze>/<task>/<config>/seed-<n>.json`, and one per world graph
+//! discovery under `results/<maze>/discover/seed-<n>.json`. They outlive the
+//! machine that ran them: `worldgraph table` renders them, `worldgraph
+//! experiment` skips the runs they record, and `worldgraph experiment
+//! --reproduce` reruns one and checks its test score.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+
+use crate::commands::train::TrainConfig;
+
+/// Version of the summary format.
+pub const RESULT_SCHEMA: u32 = 1;
+
+/// How a run's world graph was discovered (what reproducing it reruns).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscoverSpec {
+    /// Maze (`small`, `medium`, `large`).
+    pub maze: String,
+    /// Discovery seed (the run's training seed).
+    pub seed: u64,
+    /// Rounds of discovery.
+    pub rounds: u32,
+}
+
+/// One point of a validation curve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CurvePoint {
+    /// Env steps trained when validated.
+    pub env_steps: u64,
+    /// Training wall seconds by then.
+    pub wall_seconds: f64,
+    /// Validation score (mean reward, or Door-Key success rate).
+    pub score: f64,
+}
+
+/// The summary of one finished `train` run of a grid.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunResult {
+    /// [`RESULT_SCHEMA`].
+    pub schema: u32,
+    /// Maze.
+    pub maze: String,
+    /// Task (`multigoal`, `multigoal-sparse`, `multigoal-stochastic`, `doorkey`).
+    pub task: String,
+    /// Agent configuration (`a2c`, `fn`, `fn-init`, `wn-pivotal-trav-init`, ...).
+    pub config: String,
+    /// Training seed.
+    pub seed: u64,
+    /// The grid file the run belongs to.
+    pub grid: String,
+    /// The resolved training configuration (budget included).
+    pub train_config: TrainConfig,
+    /// The discovery run the agent used, if any.
+    pub discover: Option<DiscoverSpec>,
+    /// Validation seeds: environments `(validation_stream, 0..validation_seeds)`.
+    pub validation_stream: u64,
+    /// Number of validation seeds.
+    pub validation_seeds: usize,
+    /// Test seeds: environments `(test_stream, 0..test_seeds)`.
+    pub test_stream: u64,
+    /// Number of test seeds.
+    pub test_seeds: usize,
+    /// Test score of the best validation checkpoint.
+    pub test_score: f64,
+    /// Mean test return.
+    pub test_return: f64,
+    /// Test success rate.
+    pub test_success_rate: f64,
+    /// Best validation score.
+    pub best_validation: f64,
+    /// Env steps at the best validation checkpoint.
+    pub best_env_steps: u64,
+    /// The validation curve.
+    pub validation_curve: Vec<CurvePoint>,
+    /// Env steps trained.
+    pub env_steps: u64,
+    /// Training wall seconds.
+    pub wall_seconds: f64,
+    /// Training env-steps per second.
+    pub train_steps_per_sec: f64,
+    /// libtorch threads of the run.
+    pub torch_threads: usize,
+    /// Runs side by side on the machine while it ran.
+    pub jobs: usize,
+    /// The commit it ran on (`git rev-parse HEAD`; `+dirty` if the tree had
+    /// changes).
+    pub commit: String,
+}
+
+impl RunResult {
+    /// True if the run failed by the paper's rule: the validation score
+    /// never rose above 0 (section 5, the notes of Table 1).
+    pub fn failed(&self) -> bool {
+        !self.validation_curve.iter().any(|p| p.score > 0.0)
+    }
+}
+
+/// The summary of one world graph discovery of a grid.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscoverResult {
+    /// [`RESULT_SCHEMA`].
+    pub schema: u32,
+    /// What was run.
+    pub spec: DiscoverSpec,
+    /// The grid file.
+    pub grid: String,
+    /// `discovery.json` of the run, as `discover` wrote it.
+    pub summary: serde_json::Value,
+    /// The commit it ran on.
+    pub commit: String,
+}
+
+/// `results/<maze>/<task>/<config>/seed-<n>.json`.
+pub fn run_path(root: &Path, maze: &str, task: &str, config: &str, seed: u64) -> PathBuf {
+    root.join(maze)
+        .join(task)
+        .join(config)
+        .join(format!("seed-{seed}.json"))
+}
+
+/// `results/<maze>/discover/seed-<n>.json`.
+pub fn discover_path(root: &Path, maze: &str, seed: u64) -> PathBuf {
+    root.join(maze)
+        .join("discover")
+        .join(format!("seed-{seed}.json"))
+}
+
+/// Reads one run summary.
+pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let r: RunResult = serde_json::from_slice(&bytes)
+        .with_context(|| format!("{} is not a run summary", path.display()))?;
+    anyhow::ensure!(
+        r.schema == RESULT_SCHEMA,
+        "{} has summary schema {}, this build reads {RESULT_SCHEMA}",
+        path.display(),
+        r.schema
+    );
+    Ok(r)
+}
+
+/// Every run summary under `root` (discovery summaries are skipped),
+/// sorted by path.
+pub fn read_all_runs(root: &Path) -> anyhow::Result<Vec<RunResult>> {
+    let mut files = Vec::new();
+    collect(root, &mut files)?;
+    files.sort();
+    files
+        .iter()
+        .filter(|p| p.parent().and_then(|d| d.file_name()) != Some("discover".as_ref()))
+        .map(|p| read_run(p))
+        .collect()
+}
+
+fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
+    for e in entries {
+        let p = e?.path();
+        if p.is_dir() {
+            collect(&p, out)?;
+        } else if p
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with("seed-") && n.ends_with(".json"))
+        {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// The commit of the working tree, `+dirty` when tracked files changed;
+/// `unknown` outside a git checkout.
+pub fn current_commit() -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    match git(&["rev-parse", "HEAD"]) {
+        Some(head) => match git(&["status", "--porcelain", "--untracked-files=no"]) {
+            Some(s) if !s.is_empty() => format!("{head}+dirty"),
+            _ => head,
+        },
+        None => "unknown".to_string(),
+    }
+}
