@@ -8,6 +8,8 @@ mod discover;
 mod pipeline;
 // Stage 2: the protocol's files, determinism, kill and resume, refusals.
 mod train;
+// The paper's experiments: a grid's summaries, restart, reproduce, tables.
+mod experiment;
 // Property tests over layouts, discovery configs and role arguments.
 mod fuzz;
 // Failures that must be clean and runs that must not collide (issue 14).

@@ -1,0 +1,215 @@
+//! `worldgraph experiment`, `--reproduce` and `table` as a user runs them:
+//! a grid with a real (one-round) discovery, its summaries under
+//! `results/`, finished runs skipped on a restart, a stopped grid resumed
+//! to the uninterrupted result, a summary reproduced from its JSON alone,
+//! and the tables rendered beside the paper's values.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn worldgraph(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(args)
+        .current_dir(dir)
+        .env("WORLDGRAPH_TORCH_THREADS", "1")
+        .output()
+        .expect("run worldgraph")
+}
+
+fn ok(out: &Output) -> (String, String) {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "status {:?}\nstderr: {stderr}", out.status);
+    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+}
+
+fn refused(out: &Output) -> String {
+    assert!(!out.status.success(), "expected a refusal");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A CI-sized grid: the small maze, one seed, two iterations of 32 × 60
+/// env steps per run, a one-round discovery, 2 validation and 3 test seeds.
+fn grid(name: &str, env_steps: u64, configs: &str) -> String {
+    format!(
+        "name = \"{name}\"\nseeds = [0]\nvalidation_seeds = 2\ntest_seeds = 3\n\
+         [[maze]]\nname = \"small\"\nenv_steps = {env_steps}\neval_every = 1920\ndiscover_rounds = 1\n\
+         [[group]]\ntable = 1\ntasks = [\"multigoal\"]\nconfigs = [{configs}]\n"
+    )
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(
+        &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("grid.toml"),
+        grid("tiny", 3840, "\"a2c\", \"wn-pivotal-trav-init\""),
+    )
+    .unwrap();
+    let (_, err) = ok(&worldgraph(d, &["experiment", "grid.toml", "--jobs", "2"]));
+    assert!(err.contains("2 training runs (0 done, 2 to run), 1 discoveries to run"), "{err}");
+
+    let wn = json(&d.join("results/small/multigoal/wn-pivotal-trav-init/seed-0.json"));
+    let a2c = json(&d.join("results/small/multigoal/a2c/seed-0.json"));
+    for (r, config) in [(&wn, "wn-pivotal-trav-init"), (&a2c, "a2c")] {
+        assert_eq!(r["config"], config);
+        assert_eq!(r["maze"], "small");
+        assert_eq!(r["task"], "multigoal");
+        assert_eq!(r["seed"], 0);
+        assert_eq!(r["env_steps"], 3840);
+        assert_eq!(r["test_seeds"], 3);
+        assert_eq!(r["validation_seeds"], 2);
+        assert_eq!(r["train_config"]["env_steps"], 3840);
+        let curve = r["validation_curve"].as_array().unwrap();
+        assert_eq!(curve.len(), 2, "one validation per 1920 env steps");
+        assert_eq!(curve[1]["env_steps"], 3840);
+        assert!(curve[1]["wall_seconds"].as_f64().unwrap() > 0.0);
+        let score = r["test_score"].as_f64().unwrap();
+        assert!((-10.0..=10.0).contains(&score), "{score}");
+    }
+    // The WN run used the grid's discovery, recorded so it can be redone;
+    // A2C needs none.
+    assert_eq!(wn["discover"]["rounds"], 1);
+    assert!(a2c["discover"].is_null());
+    let disc = json(&d.join("results/small/discover/seed-0.json"));
+    assert!(disc["summary"]["pivotal_states"].as_u64().unwrap() > 0);
+    assert_eq!(disc["spec"]["rounds"], 1);
+
+    // A restart runs nothing: every run has its summary.
+    let before = std::fs::read(d.join("results/small/multigoal/a2c/seed-0.json")).unwrap();
+    let (_, err) = ok(&worldgraph(d, &["experiment", "grid.toml"]));
+    assert!(err.contains("(2 done, 0 to run), 0 discoveries to run"), "{err}");
+    assert!(err.contains("0 runs finished, 0 failed"), "{err}");
+    assert_eq!(
+        std::fs::read(d.join("results/small/multigoal/a2c/seed-0.json")).unwrap(),
+        before
+    );
+
+    // Each summary reproduces from its JSON alone, discovery included, in a
+    // fresh working directory.
+    let (out, _) = ok(&worldgraph(
+        d,
+        &[
+            "experiment",
+            "--reproduce",
+            "results/small/multigoal/wn-pivotal-trav-init/seed-0.json",
+            "--work",
+            "again",
+        ],
+    ));
+    assert!(out.contains("reproduced: the same test score"), "{out}");
+    assert!(d.join("again/discover/small-seed-0/graph.json").exists());
+    // A summary whose score was changed does not.
+    let mut bad = a2c.clone();
+    bad["test_score"] = serde_json::json!(a2c["test_score"].as_f64().unwrap() + 0.5);
+    std::fs::write(d.join("edited.json"), serde_json::to_vec(&bad).unwrap()).unwrap();
+    let err = refused(&worldgraph(
+        d,
+        &["experiment", "--reproduce", "edited.json", "--work", "edited"],
+    ));
+    assert!(err.contains("differs"), "{err}");
+
+    // The tables: each run's cell beside the paper's value, the budget, the
+    // time to score and the curves.
+    ok(&worldgraph(d, &["table", "results", "--out", "docs/results.md"]));
+    let md = std::fs::read_to_string(d.join("docs/results.md")).unwrap();
+    let a2c_cell = format!(
+        "| A2C | {:.3} ± 0.000 (n=1) | 2.04 |",
+        a2c["test_score"].as_f64().unwrap()
+    );
+    assert!(md.contains(&a2c_cell), "{a2c_cell} not in\n{md}");
+    assert!(md.contains("| FN | — | Fail |"), "{md}");
+    assert!(md.contains("| small | 3840 | 1920 | 2 |"), "{md}");
+    assert!(md.contains("## Time to score"), "{md}");
+    for f in [
+        "docs/figures/fig4-small-multigoal.png",
+        "docs/figures/time-to-score-small-multigoal.png",
+    ] {
+        let png = std::fs::read(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert_eq!(&png[1..4], b"PNG", "{f}");
+    }
+}
+
+#[test]
+fn a_stopped_grid_resumes_to_the_uninterrupted_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Six iterations, three validations: long enough to stop in between.
+    std::fs::write(d.join("whole.toml"), grid("whole", 11520, "\"a2c\"")).unwrap();
+    std::fs::write(d.join("stopped.toml"), grid("stopped", 11520, "\"a2c\"")).unwrap();
+    ok(&worldgraph(d, &["experiment", "whole.toml", "--results", "whole"]));
+
+    let child = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(["experiment", "stopped.toml", "--results", "stopped"])
+        .current_dir(d)
+        .env("WORLDGRAPH_TORCH_THREADS", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Stop it once its run has checkpointed a segment.
+    let state = d.join("runs/experiments/stopped/small/multigoal/a2c/seed-0/checkpoint/state.json");
+    let t0 = Instant::now();
+    while !state.exists() && t0.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(state.exists(), "the run never checkpointed");
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let finished_first = d.join("stopped/small/multigoal/a2c/seed-0.json").exists();
+    if !finished_first {
+        assert!(!out.status.success(), "a stopped grid exits non-zero");
+        assert!(err.contains("stopped"), "{err}");
+    }
+    // Its run was stopped with it: the run directory is free again.
+    let (_, err) = ok(&worldgraph(d, &["experiment", "stopped.toml", "--results", "stopped"]));
+    assert!(!err.contains("in use"), "{err}");
+    let whole = json(&d.join("whole/small/multigoal/a2c/seed-0.json"));
+    let stopped = json(&d.join("stopped/small/multigoal/a2c/seed-0.json"));
+    assert_eq!(whole["test_score"], stopped["test_score"]);
+    let scores = |r: &serde_json::Value| -> Vec<f64> {
+        r["validation_curve"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["score"].as_f64().unwrap())
+            .collect()
+    };
+    assert_eq!(scores(&whole), scores(&stopped));
+}
+
+#[test]
+fn bad_grids_are_refused_naming_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let cases = [
+        (grid("g", 3840, "\"wn-best\""), "unknown configuration \"wn-best\""),
+        (grid("g", 3840, "\"wn-all-trav\""), "traversal"),
+        (grid("g", 3840, "\"a2c\"").replace("seeds = [0]", "seeds = []"), "at least one training seed"),
+        (grid("g", 3840, "\"a2c\"").replace("table = 1", "table = 1\nmazes = [\"large\"]"), "group maze large has no [[maze]] budget"),
+        (grid("g", 3840, "\"a2c\"").replace("discover_rounds = 1", "discover_rounds = 1\nepochs = 3"), "unknown field `epochs`"),
+        (grid("g", 3840, "\"a2c\"").replace("\"multigoal\"", "\"multi\""), "multi"),
+        (grid("g", 3840, "\"a2c\"").replace("name = \"g\"", "name = \"../g\""), "must be letters"),
+    ];
+    for (text, what) in cases {
+        std::fs::write(d.join("bad.toml"), &text).unwrap();
+        let err = refused(&worldgraph(d, &["experiment", "bad.toml"]));
+        assert!(err.contains(what), "{what:?} not in {err}");
+        assert!(!d.join("runs").exists(), "a refused grid starts nothing");
+    }
+    let err = refused(&worldgraph(d, &["table", "nothing-here"]));
+    assert!(err.contains("nothing-here"), "{err}");
+}
