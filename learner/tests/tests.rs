@@ -8,3 +8,5 @@ mod gcp_learns;
 mod pivotal_doorways;
 // Stage 2: the A2C baseline and WN with traversal and π_g init learn.
 mod hrl_learns;
+// π_g steering MultiGoal-Stochastic traversals is fine-tuned and checkpointed.
+mod steering;

@@ -6,6 +6,8 @@
 //! - [`worker`]: the goal-conditioned Worker and its reward;
 //! - [`wide_narrow`]: Wide-then-Narrow Manager instructions (section 4.2);
 //! - [`traversal`]: world graph traversal (section 4.3);
+//! - [`steering`]: `π_g` steering traversals in stochastic worlds, and its
+//!   fine-tuning (section 4.3);
 //! - [`init`]: initialisation from `π_g` (section 5, Control Experiments).
 //!
 //! [`HrlAgent`] runs one of them on a [`BatchEnvironment`]: `A2C`, `FN`
@@ -22,6 +24,7 @@
 pub mod a2c;
 pub mod feudal;
 pub mod init;
+pub mod steering;
 pub mod traversal;
 pub mod wide_narrow;
 pub mod worker;
@@ -45,6 +48,7 @@ use crate::batch_env::{BatchEnvironment, ObsView};
 use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
 use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
+use steering::{Leg, Steering};
 use traversal::{Execution, Progress, Traversal};
 use wide_narrow::{WideNarrowHead, Window};
 use worker::WorkerGoal;
@@ -111,6 +115,9 @@ pub struct AgentConfig {
     pub goal_reward: f32,
     /// The Worker's reward per step.
     pub step_penalty: f32,
+    /// Fine-tune `π_g` on the traversal steps it steers (MultiGoal-
+    /// Stochastic with traversal; [`steering`]).
+    pub fine_tune_pi_g: bool,
 }
 
 impl Default for AgentConfig {
@@ -130,6 +137,7 @@ impl Default for AgentConfig {
             manager: A2cConfig::default(),
             goal_reward: 1.0,
             step_penalty: -0.01,
+            fine_tune_pi_g: true,
         }
     }
 }
@@ -349,6 +357,8 @@ pub struct HrlAgent {
     graph: Option<WorldGraph>,
     gcp: Option<GoalConditionedPolicy>,
     execution: Execution,
+    /// `π_g`'s fine-tuning while it steers traversals (training only).
+    steering: Option<Steering>,
     ctl: Controller,
     rollout: Rollout,
     seed: u64,
@@ -499,6 +509,19 @@ impl HrlAgent {
             )
             .into());
         }
+        let steering = match &inputs.gcp {
+            Some(gcp) if cfg.traversal && execution == Execution::Steer && cfg.fine_tune_pi_g => {
+                Some(Steering::new(
+                    gcp,
+                    cfg.envs,
+                    width,
+                    height,
+                    cfg.goal_reward,
+                    cfg.step_penalty,
+                ))
+            }
+            _ => None,
+        };
         let mut agent = HrlAgent {
             cfg: cfg.clone(),
             task,
@@ -518,6 +541,7 @@ impl HrlAgent {
             graph: if cfg.traversal { inputs.graph } else { None },
             gcp: inputs.gcp,
             execution,
+            steering,
             ctl: Controller {
                 worker_state: LstmState::zeros(1, 1),
                 manager_state: None,
@@ -804,14 +828,18 @@ impl HrlAgent {
     }
 
     /// Actions for the environments under traversal: the recorded action
-    /// (replay) or `π_g`'s greedy step towards the next node (steer).
+    /// (replay) or `π_g`'s step towards the next node (steer): sampled and
+    /// recorded for its fine-tuning when `train` and fine-tuning is on,
+    /// greedy otherwise. Returns whether the step was recorded.
     fn traversal_actions(
         &mut self,
         ctl: &mut Controller,
         obs: &ObsView<'_>,
         actions: &mut [u8],
-    ) -> Result<(), LearnerError> {
+        train: bool,
+    ) -> Result<bool, LearnerError> {
         let mut steer = false;
+        let mut recorded = false;
         for (e, c) in ctl.envs.iter().enumerate() {
             if let Some(t) = &c.traversal {
                 match t.execution() {
@@ -846,12 +874,23 @@ impl HrlAgent {
                 .as_ref()
                 .expect("steer state")
                 .reset_done(&mask(&fresh));
-            let (chosen, next) =
-                gcp.greedy_step(obs, &goals, &state)
-                    .map_err(|e| LearnerError::Checkpoint {
+            let (chosen, next) = match self.steering.as_mut().filter(|_| train) {
+                Some(steering) => {
+                    let (logits, next) = steering.act(gcp, obs, &goals, &state);
+                    let probs = tch::no_grad(|| logits.softmax(-1, tch::Kind::Float));
+                    recorded = true;
+                    (
+                        crate::seeding::sample_categorical(&mut ctl.rng, &probs, false),
+                        next,
+                    )
+                }
+                None => gcp.greedy_step(obs, &goals, &state).map_err(|e| {
+                    LearnerError::Checkpoint {
                         path: "π_g".into(),
                         message: e.to_string(),
-                    })?;
+                    }
+                })?,
+            };
             ctl.steer_state = Some(next);
             for (e, c) in ctl.envs.iter().enumerate() {
                 if c.traversal
@@ -863,7 +902,7 @@ impl HrlAgent {
                 }
             }
         }
-        Ok(())
+        Ok(recorded)
     }
 
     /// One environment step of the whole batch: Manager decisions,
@@ -881,6 +920,7 @@ impl HrlAgent {
         stats: &mut StepCounts,
     ) -> Result<(), LearnerError> {
         let n = env.num_envs();
+        let steered;
         let (actions, out_state) = {
             let obs = env.observe();
             self.decide(ctl, &obs, train, &mut trace);
@@ -904,10 +944,22 @@ impl HrlAgent {
             };
             let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
             let mut actions = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
-            self.traversal_actions(ctl, &obs, &mut actions)?;
+            steered = self.traversal_actions(ctl, &obs, &mut actions, train)?;
             (actions, out.state)
         };
         let traversing: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.is_some()).collect();
+        // The steered legs before the step (for π_g's fine-tuning).
+        let legs_before: Vec<Option<usize>> = ctl
+            .envs
+            .iter()
+            .map(|c| {
+                c.traversal
+                    .as_ref()
+                    .filter(|t| t.execution() == Execution::Steer)
+                    .map(Traversal::leg)
+            })
+            .collect();
+        let mut legs = vec![Leg::Idle; n];
         let t1 = std::time::Instant::now();
         env.step(&actions)?;
         self.times.step += t1.elapsed().as_secs_f64();
@@ -953,7 +1005,16 @@ impl HrlAgent {
                 stats.traversal_steps += 1;
                 dones[e] = true;
                 let t = c.traversal.as_mut().expect("traversing");
-                match t.advance(cell, ended) {
+                let progress = t.advance(cell, ended);
+                if let Some(before) = legs_before[e] {
+                    legs[e] = match progress {
+                        Progress::Continue if t.leg() > before => Leg::Reached,
+                        Progress::Continue => Leg::Going,
+                        Progress::Arrived => Leg::Reached,
+                        Progress::Stopped => Leg::Ended,
+                    };
+                }
+                match progress {
                     Progress::Continue => {}
                     Progress::Arrived => {
                         c.traversal = None;
@@ -984,6 +1045,9 @@ impl HrlAgent {
                 weights[e] = 1.0;
             }
             let c = &mut ctl.envs[e];
+            if interval_over && legs[e] == Leg::Going {
+                legs[e] = Leg::Ended;
+            }
             if interval_over {
                 stats.intervals += 1;
                 c.need_decision = true;
@@ -1001,6 +1065,12 @@ impl HrlAgent {
         if train {
             self.rollout.record(&actions, &rewards, &dones, &weights);
         }
+        if steered && let Some(s) = self.steering.as_mut() {
+            let steer_actions: Vec<u8> = (0..n)
+                .map(|e| if legs[e] == Leg::Idle { 0 } else { actions[e] })
+                .collect();
+            s.book(&steer_actions, &legs);
+        }
         ctl.worker_state = out_state.reset_done(&mask(&dones));
         Ok(())
     }
@@ -1015,6 +1085,9 @@ impl HrlAgent {
         let empty = self.controller(0, 0);
         let mut ctl = std::mem::replace(&mut self.ctl, empty);
         self.rollout.start(&ctl.worker_state);
+        if let (Some(s), Some(state)) = (self.steering.as_mut(), ctl.steer_state.as_ref()) {
+            s.start(state);
+        }
         let mut counts = StepCounts::default();
         for _ in 0..self.cfg.rollout_len {
             self.step_batch(&mut ctl, env, true, None, &mut counts)?;
@@ -1028,6 +1101,28 @@ impl HrlAgent {
                 per_env: self.slots(),
             });
             self.rollout.bootstrap = bootstrap_values(&self.worker, &obs, marks, &ctl.worker_state);
+            if let (Some(s), Some(gcp), Some(state)) = (
+                self.steering.as_mut(),
+                self.gcp.as_ref(),
+                ctl.steer_state.as_ref(),
+            ) {
+                let goals: Vec<u32> = ctl
+                    .envs
+                    .iter()
+                    .map(|c| {
+                        c.traversal
+                            .as_ref()
+                            .and_then(Traversal::waypoint)
+                            .unwrap_or(NO_GOAL)
+                    })
+                    .collect();
+                let fresh: Vec<bool> = ctl
+                    .envs
+                    .iter()
+                    .map(|c| c.traversal.as_ref().is_none_or(Traversal::leg_starts))
+                    .collect();
+                s.update(gcp, &obs, &goals, &state.reset_done(&mask(&fresh)));
+            }
         }
         let t0 = std::time::Instant::now();
         let (loss, worker) = self.rollout.loss(&self.worker, &self.cfg.worker);
@@ -1059,6 +1154,9 @@ impl HrlAgent {
         }
         ctl.worker_state = ctl.worker_state.detach();
         if let Some(s) = ctl.manager_state.as_mut() {
+            *s = s.detach();
+        }
+        if let Some(s) = ctl.steer_state.as_mut() {
             *s = s.detach();
         }
         self.ctl = ctl;
@@ -1163,6 +1261,9 @@ impl HrlAgent {
         if let Some(vs) = &self.manager_vs {
             add("manager", vs);
         }
+        if let (Some(_), Some(gcp)) = (&self.steering, &self.gcp) {
+            add("pi_g", gcp.var_store());
+        }
         out.extend(
             self.worker_opt
                 .state()
@@ -1174,6 +1275,14 @@ impl HrlAgent {
                 o.state()
                     .into_iter()
                     .map(|(k, t)| (format!("manager-{k}"), t)),
+            );
+        }
+        if let Some(s) = &self.steering {
+            out.extend(
+                s.optimiser()
+                    .state()
+                    .into_iter()
+                    .map(|(k, t)| (format!("pi_g-{k}"), t)),
             );
         }
         out
@@ -1200,8 +1309,14 @@ impl HrlAgent {
             .map_err(|e| bad(e.to_string()))?;
         let find = |k: &str| loaded.iter().find(|(n, _)| n == k).map(|(_, t)| t);
         tch::no_grad(|| -> Result<(), LearnerError> {
+            let fine_tuned = self
+                .gcp
+                .as_ref()
+                .filter(|_| self.steering.is_some())
+                .map(|g| ("pi_g", g.var_store()));
             for (prefix, vs) in std::iter::once(("worker", &self.worker_vs))
                 .chain(self.manager_vs.as_ref().map(|v| ("manager", v)))
+                .chain(fine_tuned)
             {
                 for (k, mut t) in vs.variables() {
                     let key = format!("{prefix}/{k}");
@@ -1230,6 +1345,11 @@ impl HrlAgent {
         self.worker_opt.load_state(&strip("worker-")).map_err(bad)?;
         if let Some(o) = self.manager_opt.as_mut() {
             o.load_state(&strip("manager-")).map_err(bad)?;
+        }
+        if let Some(s) = self.steering.as_mut() {
+            s.optimiser_mut()
+                .load_state(&strip("pi_g-"))
+                .map_err(bad)?;
         }
         Ok(())
     }

@@ -176,6 +176,12 @@ impl Traversal {
         self.waypoints.get(self.leg).copied()
     }
 
+    /// Steer: the index of the edge under way (its waypoint's position
+    /// in the route).
+    pub fn leg(&self) -> usize {
+        self.leg
+    }
+
     /// True when a new edge starts with the next step (`π_g`'s core state
     /// is then reset: each edge is a goal episode of its own).
     pub fn leg_starts(&self) -> bool {
