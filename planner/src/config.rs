@@ -35,7 +35,7 @@ pub enum CandidateSet {
         path: String,
     },
     /// Cells handed over by the caller, e.g. the pivotal states `V_p`
-    /// chosen by the learner ([`crate::pivotal::select_pivotal`]).
+    /// chosen by the learner by [`crate::pivotal::top_ratio`].
     Given,
 }
 

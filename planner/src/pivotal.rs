@@ -6,9 +6,8 @@
 //!   episode (floor, open doors and the exit, reachable from the start).
 //! - [`v_rand`]: `k` of those, drawn uniformly with a seed.
 //! - [`parse_node_list`] / [`read_node_file`]: a hand-made list.
-//! - [`select_pivotal`]: the paper's `V_p`, the top fraction (20%) of the
-//!   visited states ranked by the prior mean of the latent model, for when
-//!   the learner hands its scores over.
+//! - [`top_ratio`]: the paper's rule for `V_p`, the top fraction of the
+//!   visited states ranked by the prior mean of the latent model.
 //!
 //! Every set goes through [`check_nodes`], which refuses cells outside the
 //! grid, cells the agent cannot stand on and duplicates, with messages that
@@ -61,30 +60,23 @@ pub fn v_rand(layout: &Layout, k: usize, seed: u64) -> Result<Vec<CellIdx>, Plan
     Ok(chosen)
 }
 
-/// `V_p`: the top `fraction` of `scored` cells by score (the paper ranks
-/// visited states by the mean of the latent model's Beta prior and keeps
-/// the top 20%, section 3.2). Ties go to the lower cell index; at least one
-/// cell is kept when `scored` is not empty. Cells the agent cannot stand
-/// on are skipped, so the result always passes [`check_nodes`].
-pub fn select_pivotal(layout: &Layout, scored: &[(CellIdx, f32)], fraction: f32) -> Vec<CellIdx> {
-    let standable = standable_mask(layout);
-    let mut s: Vec<(CellIdx, f32)> = scored
-        .iter()
-        .copied()
-        .filter(|(c, v)| standable.get(c.index()).copied().unwrap_or(false) && v.is_finite())
-        .collect();
-    s.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-    s.dedup_by_key(|(c, _)| *c);
-    // Rounded up, at least one: the learner's `pivotal_states` counts the same way.
-    let keep = ((s.len() as f64 * f64::from(fraction.clamp(0.0, 1.0))).ceil() as usize)
-        .max(usize::from(!s.is_empty()));
-    let mut cells: Vec<CellIdx> = s
+/// `V_p`'s rule (section 3.2): the top `ratio` of `(cell, pivotality)`
+/// pairs, at least one, most pivotal first, ties broken by the lower cell
+/// index. The learner ranks the visited cells by the mean of the latent
+/// model's Beta prior (`learner::vae`); [`nodes_from_cells`] turns the
+/// result into graph nodes.
+pub fn top_ratio(mut ranked: Vec<(u32, f32)>, ratio: f64) -> Vec<u32> {
+    if ranked.is_empty() {
+        return Vec::new();
+    }
+    ranked.sort_by(|x, y| y.1.total_cmp(&x.1).then(x.0.cmp(&y.0)));
+    let count =
+        ((ratio.clamp(0.0, 1.0) * ranked.len() as f64).ceil() as usize).clamp(1, ranked.len());
+    ranked
         .into_iter()
-        .take(keep.min(MAX_NODES))
-        .map(|(c, _)| c)
-        .collect();
-    cells.sort_unstable();
-    cells
+        .take(count)
+        .map(|(cell, _)| cell)
+        .collect()
 }
 
 /// Node cells from raw cell indices (e.g. the learner's pivotal states,
@@ -387,19 +379,15 @@ mod tests {
     }
 
     #[test]
-    fn select_pivotal_keeps_the_top_fraction() {
-        let l = small();
-        let all = v_all(&l);
-        let scored: Vec<(CellIdx, f32)> = all
-            .iter()
-            .enumerate()
-            .map(|(i, &c)| (c, i as f32))
-            .collect();
-        let p = select_pivotal(&l, &scored, 0.2);
-        assert_eq!(p.len(), (all.len() as f64 * 0.2).ceil() as usize);
-        assert!(p.iter().all(|c| all[all.len() - p.len()..].contains(c)));
-        check_nodes(&l, &p).expect("pivotal states are valid nodes");
-        assert_eq!(select_pivotal(&l, &scored[..1], 0.2).len(), 1);
+    fn top_ratio_keeps_the_most_pivotal_fraction_at_least_one() {
+        let ranked: Vec<(u32, f32)> = (0..10).map(|c| (c, (c % 5) as f32)).collect();
+        // 10 cells at ratio 0.25: ceil(2.5) = 3, most pivotal first, ties
+        // to the lower cell.
+        assert_eq!(top_ratio(ranked.clone(), 0.25), vec![4, 9, 3]);
+        assert_eq!(top_ratio(ranked[..1].to_vec(), 0.2), vec![0]);
+        assert_eq!(top_ratio(ranked.clone(), 0.0).len(), 1);
+        assert_eq!(top_ratio(ranked, 2.0).len(), 10);
+        assert!(top_ratio(Vec::new(), 0.2).is_empty());
     }
 
     #[test]

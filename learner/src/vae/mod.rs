@@ -426,7 +426,7 @@ impl LatentModel {
             .into_iter()
             .collect();
         let means = self.prior_mean(&cells);
-        top_ratio(cells.into_iter().zip(means).collect(), ratio)
+        planner::pivotal::top_ratio(cells.into_iter().zip(means).collect(), ratio)
     }
 
     /// Like [`LatentModel::pivotal_states`], but a cell's pivotality is the
@@ -445,7 +445,7 @@ impl LatentModel {
             let entry = per_cell.entry(pose.cell).or_default();
             *entry = (entry.0 + mean, entry.1 + 1.0);
         }
-        top_ratio(
+        planner::pivotal::top_ratio(
             per_cell
                 .into_iter()
                 .map(|(cell, (sum, n))| (cell, sum / n))
@@ -453,22 +453,6 @@ impl LatentModel {
             ratio,
         )
     }
-}
-
-/// The top `ratio` (at least one) of `(cell, pivotality)` pairs, most
-/// pivotal first, ties broken by cell index.
-fn top_ratio(mut ranked: Vec<(u32, f32)>, ratio: f64) -> Vec<u32> {
-    if ranked.is_empty() {
-        return Vec::new();
-    }
-    ranked.sort_by(|x, y| y.1.total_cmp(&x.1).then(x.0.cmp(&y.0)));
-    let count =
-        ((ratio.clamp(0.0, 1.0) * ranked.len() as f64).ceil() as usize).clamp(1, ranked.len());
-    ranked
-        .into_iter()
-        .take(count)
-        .map(|(cell, _)| cell)
-        .collect()
 }
 
 /// A [`LatentModel`] with its own variable store and Adam optimiser.
