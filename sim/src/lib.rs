@@ -31,7 +31,6 @@
 #![warn(missing_docs)]
 
 pub mod batch;
-pub mod chart;
 pub mod env;
 mod error;
 pub mod layout;
