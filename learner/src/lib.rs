@@ -21,7 +21,6 @@ pub mod gcp;
 pub mod hrl;
 pub mod policy;
 pub mod seeding;
-pub mod shm_env;
 pub mod vae;
 
 pub use error::{ConfigError, LearnerError};

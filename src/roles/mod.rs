@@ -29,6 +29,7 @@ use shm_schemas::service::{RunName, list_nodes, run_config};
 
 pub mod learner;
 pub mod planner;
+pub mod shm_env;
 pub mod sim;
 
 /// iceoryx2 node name of the simulator process.
