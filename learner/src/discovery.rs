@@ -387,7 +387,7 @@ impl Discovery {
             .map_err(LearnerError::from)?;
         self.gcp
             .start_round(sim::env_seed(self.state.config.seed, EVALUATION_STREAM))?;
-        Ok(self.gcp.evaluate(env, goal_walk_len, steps)?)
+        self.gcp.evaluate(env, goal_walk_len, steps)
     }
 
     /// True when the accuracy plateaued or the round budget is spent.
