@@ -59,7 +59,6 @@
 //! # Ok(())
 //! # }
 //! ```
-#![deny(unsafe_code)]
 #![deny(missing_docs)]
 
 mod action;

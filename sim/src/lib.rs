@@ -28,7 +28,6 @@
 //! assert!(buf.meta.iter().all(|m| (m.reward - -0.01).abs() < 1e-6 || m.reward > 0.0));
 //! ```
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 pub mod batch;
 pub mod env;
