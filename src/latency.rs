@@ -1,4 +1,4 @@
-//! HDR latency histograms of the hot loops (DESIGN.md section 2).
+//! HDR latency histograms of the hot loops (README.md, "The pipeline").
 //!
 //! Every process records its performance-critical intervals in nanoseconds
 //! into named [`hdrhistogram::Histogram`]s. Recording is a few nanoseconds

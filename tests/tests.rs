@@ -10,5 +10,7 @@ mod pipeline;
 mod train;
 // Property tests over layouts, discovery configs and role arguments.
 mod fuzz;
+// The docs stand alone: relative links resolve inside the repository.
+mod docs;
 // Failures that must be clean and runs that must not collide (issue 14).
 mod reliability;

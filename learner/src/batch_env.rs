@@ -1,5 +1,5 @@
 //! The batch-environment trait the learner's algorithms are written against
-//! (DESIGN.md section 2), and its in-process implementation.
+//! (README.md, "The pipeline"), and its in-process implementation.
 //!
 //! Two transports implement [`BatchEnvironment`]:
 //! - [`InProcess`]: the simulator in this process (fast tests, single-process

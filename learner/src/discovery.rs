@@ -1,4 +1,4 @@
-//! Stage 1 of Shang et al. 2019 (section 3; DESIGN.md section 1, steps 1–6):
+//! Stage 1 of Shang et al. 2019 (section 3):
 //! world graph discovery.
 //!
 //! Each **round** of the loop:

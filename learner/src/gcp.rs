@@ -25,7 +25,7 @@
 //! - **Trajectories.** The finished goal episodes' `(s_t, a_t)` sequences
 //!   are kept for the latent model ([`GoalConditionedPolicy::take_trajectories`]):
 //!   `π_g`'s rollouts are one of the two trajectory sources of world graph
-//!   discovery (section 3.1, DESIGN.md section 1, step 1).
+//!   discovery (section 3.1).
 //!
 //! The environments come through [`BatchEnvironment`], so `π_g` trains
 //! in-process or over the shared-memory pipeline unchanged. Everything is

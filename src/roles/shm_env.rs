@@ -1,5 +1,5 @@
 //! The shared-memory client of the pipeline: a [`BatchEnvironment`] whose
-//! environments live in the sim process (DESIGN.md section 2).
+//! environments live in the sim process (README.md, "The pipeline").
 //!
 //! Observation batches are read **in place**: [`ShmEnv::observe`] borrows the
 //! received iceoryx2 sample, and the chunk goes back to the simulator when the
