@@ -8,9 +8,13 @@ CARGO ?= cargo
 demo: libtorch
 	$(CARGO) run --release --bin worldgraph -- demo
 
-# Every test of the workspace (unit, property, multi-process, tch training).
+# Every test of the workspace (unit, property, multi-process, tch training);
+# then the IPC and simulator crates once more with debug assertions on (the
+# loan sentinel, debug_assert!s; profile debug-asserts in Cargo.toml), and
+# the benches, which must keep compiling.
 test: libtorch
 	$(CARGO) test --release --workspace --no-fail-fast
+	$(CARGO) test --profile debug-asserts -p shm_schemas -p sim --no-fail-fast
 	$(CARGO) build --release --workspace --benches
 
 libtorch:

@@ -1,5 +1,9 @@
 //! Simulator step throughput against batch size (criterion).
 //! `cargo bench --bench sim_step`; the CLI's `bench sim` adds the memcpy bound.
+#![allow(
+    missing_docs,
+    reason = "criterion_group! defines an undocumented pub fn"
+)]
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use sim::{BatchEnv, EnvConfig, Maze, Task};

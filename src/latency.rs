@@ -1,4 +1,4 @@
-//! HDR latency histograms of the hot loops (DESIGN.md section 2).
+//! HDR latency histograms of the hot loops (README.md, "The pipeline").
 //!
 //! Every process records its performance-critical intervals in nanoseconds
 //! into named [`hdrhistogram::Histogram`]s. Recording is a few nanoseconds
@@ -13,7 +13,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use hdrhistogram::Histogram;
-use sim::chart::{LineChart, Series, XScale};
+
+use crate::chart::{LineChart, Series, XScale};
 
 /// Highest trackable value: 60 s in ns; larger values are clamped.
 const MAX_NS: u64 = 60_000_000_000;

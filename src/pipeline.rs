@@ -273,7 +273,7 @@ pub fn spawn_sim_env(
     run_name: &str,
     dir: &Path,
 ) -> anyhow::Result<(
-    learner::shm_env::ShmEnv<iceoryx2::prelude::ipc::Service>,
+    crate::roles::shm_env::ShmEnv<iceoryx2::prelude::ipc::Service>,
     Pipeline,
 )> {
     let (layout, env_cfg) = w.build()?;
@@ -295,14 +295,14 @@ pub fn spawn_sim_env(
     p.spawn(Role::Sim)?;
     let run = shm_schemas::service::RunName::new(run_name)?;
     let shape = shm_schemas::ObsShape::new(envs, layout.width, layout.height)?;
-    let opts = learner::shm_env::ShmEnvOptions {
+    let opts = crate::roles::shm_env::ShmEnvOptions {
         node_name: crate::roles::LEARNER_NODE.into(),
         sim_node_name: crate::roles::SIM_NODE.into(),
         connect_timeout: Duration::from_secs(60),
         task: Some(env_cfg.task.name().into()),
-        ..learner::shm_env::ShmEnvOptions::default()
+        ..crate::roles::shm_env::ShmEnvOptions::default()
     };
-    let env = learner::shm_env::ShmEnv::connect(
+    let env = crate::roles::shm_env::ShmEnv::connect(
         &shm_schemas::service::run_config(&run)?,
         run,
         shape,

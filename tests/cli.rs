@@ -217,7 +217,33 @@ fn bench_sim_json_has_the_documented_fields() {
     ] {
         assert!(r[k].as_f64().is_some_and(|v| v > 0.0), "{k} in {r}");
     }
+    // What was run, as asked, and the bytes of one observation: the small
+    // maze's 13×13 cells and one 20-byte EnvMeta.
+    assert_eq!(
+        (&r["maze"], &r["task"], &r["envs"], &r["threads"]),
+        (&"small".into(), &"multigoal".into(), &64.into(), &2.into()),
+        "{r}"
+    );
     assert_eq!(r["obs_bytes_per_step"], 13 * 13 + 20);
+    // The ratio is the median of the windows' ratios.
+    let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+    assert!(
+        f("ratio_min") <= f("ratio_to_memcpy_bound")
+            && f("ratio_to_memcpy_bound") <= f("ratio_max"),
+        "min ≤ median ≤ max in {r}"
+    );
+    assert!(r["episodes"].as_u64().is_some_and(|e| e > 0), "{r}");
+}
+
+/// `a` and `b` agree to a relative 1e-9 (figures recomputed from others).
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+}
+
+/// The middle value of an odd count.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// The three setups of `bench pipeline` really run: shared memory, in
@@ -255,20 +281,51 @@ fn bench_pipeline_json_has_the_documented_fields_and_every_round() {
         assert!(r[k].as_f64().is_some_and(|v| v > 0.0), "{k} in {r}");
     }
     assert_eq!(r["ipc_batches_lost"], 0);
+    assert_eq!(
+        (&r["maze"], &r["envs"]),
+        (&"small".into(), &16.into()),
+        "{r}"
+    );
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    assert!(
+        f(r, "roundtrip_p50_us") <= f(r, "roundtrip_p99_us")
+            && f(r, "roundtrip_p99_us") <= f(r, "roundtrip_p999_us")
+            && f(r, "socket_roundtrip_p50_us") <= f(r, "socket_roundtrip_p99_us"),
+        "percentiles in order in {r}"
+    );
+    assert!(
+        (0.0..=1.0).contains(&f(r, "sim_wait_fraction")),
+        "a fraction: {r}"
+    );
+    // Every round measured both setups, and the headline figures are the
+    // rounds' medians and their ratios, as documented.
     let rounds = r["rounds"].as_array().expect("rounds");
     assert_eq!(rounds.len(), 5);
     for round in rounds {
-        assert!(
-            round["ipc_steps_per_sec"].as_f64().is_some_and(|v| v > 0.0),
-            "{round}"
+        let (ipc, local) = (
+            f(round, "ipc_steps_per_sec"),
+            f(round, "inprocess_steps_per_sec"),
         );
-        assert!(
-            round["inprocess_steps_per_sec"]
-                .as_f64()
-                .is_some_and(|v| v > 0.0),
-            "{round}"
-        );
+        assert!(ipc > 0.0 && local > 0.0, "{round}");
+        assert!(close(f(round, "ratio"), ipc / local), "{round}");
     }
+    let of_rounds = |k: &str| median(rounds.iter().map(|x| f(x, k)).collect());
+    assert!(
+        close(f(r, "ipc_steps_per_sec"), of_rounds("ipc_steps_per_sec"))
+            && close(
+                f(r, "inprocess_steps_per_sec"),
+                of_rounds("inprocess_steps_per_sec")
+            )
+            && close(f(r, "ipc_to_inprocess"), of_rounds("ratio")),
+        "medians of the rounds in {r}"
+    );
+    assert!(
+        close(
+            f(r, "ipc_to_socket"),
+            f(r, "ipc_steps_per_sec") / f(r, "socket_steps_per_sec")
+        ),
+        "{r}"
+    );
     let two_cpus = std::thread::available_parallelism().is_ok_and(|n| n.get() >= 2);
     if two_cpus {
         assert!(

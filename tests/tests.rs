@@ -12,5 +12,7 @@ mod train;
 mod experiment;
 // Property tests over layouts, discovery configs and role arguments.
 mod fuzz;
+// The docs stand alone: relative links resolve inside the repository.
+mod docs;
 // Failures that must be clean and runs that must not collide (issue 14).
 mod reliability;

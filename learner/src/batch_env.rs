@@ -1,11 +1,13 @@
 //! The batch-environment trait the learner's algorithms are written against
-//! (DESIGN.md section 2), and its in-process implementation.
+//! (README.md, "The pipeline"), and its in-process implementation.
 //!
 //! Two transports implement [`BatchEnvironment`]:
 //! - [`InProcess`]: the simulator in this process (fast tests, single-process
 //!   runs, the benchmark baseline);
-//! - [`crate::shm_env::ShmEnv`]: the shared-memory client of the pipeline,
-//!   which reads observation batches in place from the sim process.
+//! - `ShmEnv`, the shared-memory client of the pipeline, which reads
+//!   observation batches in place from the sim process; it lives with the
+//!   pipeline's roles in the `worldgraph` binary (`src/roles/shm_env.rs`),
+//!   so this crate builds without IPC.
 //!
 //! An algorithm sees the same [`ObsView`] either way, so it trains in-process
 //! or over the pipeline unchanged, and (the simulator being deterministic

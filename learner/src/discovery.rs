@@ -1,4 +1,4 @@
-//! Stage 1 of Shang et al. 2019 (section 3; DESIGN.md section 1, steps 1–6):
+//! Stage 1 of Shang et al. 2019 (section 3):
 //! world graph discovery.
 //!
 //! Each **round** of the loop:
@@ -387,7 +387,7 @@ impl Discovery {
             .map_err(LearnerError::from)?;
         self.gcp
             .start_round(sim::env_seed(self.state.config.seed, EVALUATION_STREAM))?;
-        Ok(self.gcp.evaluate(env, goal_walk_len, steps)?)
+        self.gcp.evaluate(env, goal_walk_len, steps)
     }
 
     /// True when the accuracy plateaued or the round budget is spent.

@@ -82,14 +82,22 @@ pub enum LearnerError {
     /// Building the world graph failed.
     #[error(transparent)]
     Planner(#[from] planner::PlannerError),
-    /// Training or evaluating the goal-conditioned policy failed (boxed:
-    /// `GcpError` itself can hold a `LearnerError`).
-    #[error(transparent)]
-    Gcp(Box<crate::gcp::GcpError>),
-}
-
-impl From<crate::gcp::GcpError> for LearnerError {
-    fn from(e: crate::gcp::GcpError) -> Self {
-        LearnerError::Gcp(Box::new(e))
-    }
+    /// The environment batch is not the one a policy was built for.
+    #[error(
+        "the policy was built for {expected_envs} environments on a {expected_width}×{expected_height} grid; got {envs} on {width}×{height}"
+    )]
+    ShapeMismatch {
+        /// Environments the policy was built for.
+        expected_envs: usize,
+        /// Grid columns it was built for.
+        expected_width: usize,
+        /// Grid rows it was built for.
+        expected_height: usize,
+        /// Environments of the batch.
+        envs: usize,
+        /// Grid columns of the batch.
+        width: usize,
+        /// Grid rows of the batch.
+        height: usize,
+    },
 }

@@ -25,7 +25,7 @@
 //! - **Trajectories.** The finished goal episodes' `(s_t, a_t)` sequences
 //!   are kept for the latent model ([`GoalConditionedPolicy::take_trajectories`]):
 //!   `π_g`'s rollouts are one of the two trajectory sources of world graph
-//!   discovery (section 3.1, DESIGN.md section 1, step 1).
+//!   discovery (section 3.1).
 //!
 //! The environments come through [`BatchEnvironment`], so `π_g` trains
 //! in-process or over the shared-memory pipeline unchanged. Everything is
@@ -47,7 +47,7 @@ use crate::a2c::input::{CellInput, GoalMarks, mask};
 use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState};
 use crate::a2c::rollout::{GradPath, Rollout, bootstrap_values};
 use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
-use crate::batch_env::{BatchEnvironment, EnvError, ObsView};
+use crate::batch_env::{BatchEnvironment, ObsView};
 use crate::error::{ConfigError, LearnerError};
 use crate::vae::{AgentPose, LatentModel, Trajectory, TrajectoryBatch};
 
@@ -182,37 +182,6 @@ impl GcpConfig {
         }
         Ok(())
     }
-}
-
-/// Errors of training or evaluating `π_g`.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum GcpError {
-    /// The batch environment failed to step.
-    #[error(transparent)]
-    Env(#[from] EnvError),
-    /// The latent model refused the rollout (its spaces do not cover the
-    /// maze or the actions), or libtorch failed.
-    #[error(transparent)]
-    Learner(#[from] LearnerError),
-    /// The environment batch is not the one the policy was built for.
-    #[error(
-        "the policy was built for {expected_envs} environments on a {expected_width}×{expected_height} grid; got {envs} on {width}×{height}"
-    )]
-    ShapeMismatch {
-        /// Environments the policy was built for.
-        expected_envs: usize,
-        /// Grid columns it was built for.
-        expected_width: usize,
-        /// Grid rows it was built for.
-        expected_height: usize,
-        /// Environments of the batch.
-        envs: usize,
-        /// Grid columns of the batch.
-        width: usize,
-        /// Grid rows of the batch.
-        height: usize,
-    },
 }
 
 /// What one training iteration (one rollout, one update) measured.
@@ -724,9 +693,9 @@ impl GoalConditionedPolicy {
     }
 
     /// The batch must be the one the policy was built for.
-    fn check_shape(&self, obs: &ObsView<'_>) -> Result<(), GcpError> {
+    fn check_shape(&self, obs: &ObsView<'_>) -> Result<(), LearnerError> {
         if obs.num_envs() != self.num_envs || obs.width != self.width || obs.height != self.height {
-            return Err(GcpError::ShapeMismatch {
+            return Err(LearnerError::ShapeMismatch {
                 expected_envs: self.num_envs,
                 expected_width: self.width,
                 expected_height: self.height,
@@ -756,9 +725,9 @@ impl GoalConditionedPolicy {
         obs: &ObsView<'_>,
         goals: &[u32],
         state: &LstmState,
-    ) -> Result<(Vec<u8>, LstmState), GcpError> {
+    ) -> Result<(Vec<u8>, LstmState), LearnerError> {
         if obs.width != self.width || obs.height != self.height || goals.len() != obs.num_envs() {
-            return Err(GcpError::ShapeMismatch {
+            return Err(LearnerError::ShapeMismatch {
                 expected_envs: goals.len(),
                 expected_width: self.width,
                 expected_height: self.height,
@@ -800,7 +769,7 @@ impl GoalConditionedPolicy {
         &mut self,
         env: &mut dyn BatchEnvironment,
         curiosity: Option<&LatentModel>,
-    ) -> Result<GcpStats, GcpError> {
+    ) -> Result<GcpStats, LearnerError> {
         let (steps, b) = (self.cfg.rollout_len, self.num_envs);
         {
             let obs = env.observe();
@@ -864,8 +833,7 @@ impl GoalConditionedPolicy {
                 .clamp(0.0, CURIOSITY_CAP_NATS)
                 * self.cfg.curiosity_coef;
             mean_curiosity = bonus.mean(Kind::Float).double_value(&[]);
-            let bonus: Vec<f32> =
-                Vec::try_from(bonus.flatten(0, -1)).map_err(LearnerError::from)?;
+            let bonus: Vec<f32> = Vec::try_from(bonus.flatten(0, -1))?;
             self.rollout.add_to_rewards(&bonus);
         }
         let LossFigures {
@@ -912,7 +880,7 @@ impl GoalConditionedPolicy {
         env: &mut dyn BatchEnvironment,
         goal_walk_len: usize,
         steps: usize,
-    ) -> Result<f64, GcpError> {
+    ) -> Result<f64, LearnerError> {
         let mut book = GoalBook::new(
             goal_walk_len.max(1),
             self.cfg.goal_time_limit(goal_walk_len),
@@ -1109,7 +1077,7 @@ mod tests {
     }
 
     #[test]
-    fn training_is_deterministic_for_a_seed_and_weights_round_trip() -> Result<(), GcpError> {
+    fn training_is_deterministic_for_a_seed_and_weights_round_trip() -> Result<(), LearnerError> {
         let layout = room();
         let env_cfg = EnvConfig {
             balls: BallSpawn::Layout,
@@ -1122,7 +1090,7 @@ mod tests {
             ..GcpConfig::default()
         };
         let run =
-            || -> Result<(Vec<GcpStats>, Vec<Trajectory>, GoalConditionedPolicy), GcpError> {
+            || -> Result<(Vec<GcpStats>, Vec<Trajectory>, GoalConditionedPolicy), LearnerError> {
                 let mut env = InProcess::new(layout.clone(), env_cfg, 4, 11, 1)?;
                 let mut gcp = GoalConditionedPolicy::new(&cfg, &layout, 4, 3, 11)?;
                 let stats = (0..5)

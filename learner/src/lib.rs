@@ -9,7 +9,6 @@
 //! ([`vae::TrajectoryBatch`]), learns a Beta prior per state, and ranks the
 //! visited states by prior mean into the pivotal states `V_p`; its per-step
 //! action reconstruction error is the curiosity bonus of `π_g`.
-#![deny(unsafe_code)]
 
 pub mod a2c;
 pub mod batch_env;
@@ -21,7 +20,6 @@ pub mod gcp;
 pub mod hrl;
 pub mod policy;
 pub mod seeding;
-pub mod shm_env;
 pub mod vae;
 
 pub use error::{ConfigError, LearnerError};

@@ -1,7 +1,7 @@
 //! The action batch (`wg/<run>/act`): the learner's answer to one
-//! observation batch, one MiniGrid action byte per environment
-//! (DESIGN.md section 4: 0 left, 1 right, 2 forward, 3 pickup, 4 drop,
-//! 5 toggle, 6 done).
+//! observation batch, one MiniGrid action byte per environment (README.md,
+//! "The environment contract": 0 left, 1 right, 2 forward, 3 pickup,
+//! 4 drop, 5 toggle, 6 done).
 //!
 //! Layout: user header [`ActHeader`], payload `[u8]` of exactly `N` bytes.
 

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-/// The four channels of the pipeline (DESIGN.md section 2). Used in error
+/// The four channels of the pipeline (README.md, "The pipeline"). Used in error
 /// messages and to build service names ([`crate::service::service_name`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Channel {

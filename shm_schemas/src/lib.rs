@@ -3,7 +3,7 @@
 //! The only crate that knows how the sim, learner and planner processes of
 //! worldgraph (Shang et al. 2019, "Learning World Graphs to Accelerate
 //! Hierarchical Reinforcement Learning", arXiv:1907.00664) lay out the data
-//! they share over iceoryx2 shared memory (DESIGN.md section 2):
+//! they share over iceoryx2 shared memory (README.md, "The pipeline"):
 //!
 //! ```text
 //!   sim ── wg/<run>/obs  (ObsHeader + [EnvMeta; N] + N×H×W cells) ──► learner, planner
@@ -59,7 +59,6 @@
 //! # Ok(())
 //! # }
 //! ```
-#![deny(unsafe_code)]
 #![deny(missing_docs)]
 
 mod action;

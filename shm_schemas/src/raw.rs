@@ -34,7 +34,7 @@
 //! Hence a loaned chunk holds valid (if stale: the previous sample's) values.
 //! The stale contents are why the views document that the writer must
 //! overwrite every meta record and cell; debug builds fill loans with a
-//! sentinel so a forgotten write shows up (STYLE.md item 10).
+//! sentinel so a forgotten write shows up.
 #![allow(unsafe_code)]
 
 use core::fmt::Debug;

@@ -1,5 +1,5 @@
 //! Batched stepping: N environments stepped in parallel with rayon, writing
-//! into caller-provided buffers (EnvPool's layout, STYLE.md item 8).
+//! into caller-provided buffers (EnvPool's layout).
 //!
 //! The caller owns the output: `cells` holds `N × H × W` bytes (environment
 //! `i`'s grid at `i·H·W`), `meta` holds `N` [`EnvMeta`] records. In the

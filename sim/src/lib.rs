@@ -2,7 +2,7 @@
 //!
 //! A batched, allocation-free re-implementation of the MiniGrid mazes used by
 //! Shang et al. 2019, *Learning World Graphs to Accelerate Hierarchical
-//! Reinforcement Learning* (arXiv:1907.00664), section 5 (DESIGN.md section 4).
+//! Reinforcement Learning* (arXiv:1907.00664), section 5 (README.md, "The environment contract").
 //!
 //! - [`layout`]: ASCII layouts ([`Layout`]), their validation, and the three
 //!   embedded mazes ([`Maze`]: small, medium, large, each with a Door-Key
@@ -28,10 +28,8 @@
 //! assert!(buf.meta.iter().all(|m| (m.reward - -0.01).abs() < 1e-6 || m.reward > 0.0));
 //! ```
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 pub mod batch;
-pub mod chart;
 pub mod env;
 mod error;
 pub mod layout;

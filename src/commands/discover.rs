@@ -10,11 +10,11 @@ use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
 use serde::Serialize;
-use sim::chart::{LineChart, Series, XScale};
 use sim::render::{Canvas, draw_grid};
 use sim::{Layout, Maze, Object, Task};
 
 use super::run::teardown;
+use crate::chart::{LineChart, Series, XScale};
 use crate::pipeline::{Pipeline, Role, world_words};
 use crate::world::WorldArgs;
 
@@ -639,7 +639,7 @@ fn curves(history: &[RoundStats]) -> LineChart {
             series("pi_g goal success", |h| h.gcp_success),
             series("kept states", |h| h.kept_fraction),
         ],
-        x_scale: XScale::Linear,
+        x_scale: XScale::Count,
     }
 }
 

@@ -21,9 +21,10 @@ use learner::hrl::{
     WorldGraphInputs,
 };
 use serde::{Deserialize, Serialize};
-use sim::chart::{LineChart, Series, XScale};
 use sim::render::{Canvas, draw_grid, write_atomic};
 use sim::{BatchEnv, EnvConfig, Layout, Maze, Task};
+
+use crate::chart::{LineChart, Series, XScale};
 
 /// Environment stream of the validation seeds: validation seed `v` is the
 /// environment `(VALIDATION_STREAM, v)`.

@@ -14,12 +14,12 @@ use iceoryx2::prelude::ipc;
 use learner::a2c::net::ActorCriticConfig;
 use learner::batch_env::{BatchEnvironment, EnvError};
 use learner::policy::{ActorCriticPolicy, Policy, RandomPolicy};
-use learner::shm_env::{ShmEnv, ShmEnvOptions, StreamStats};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 use shm_schemas::ObsShape;
 
+use super::shm_env::{ShmEnv, ShmEnvOptions, StreamStats};
 use super::{
     EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE,
     config_exit,

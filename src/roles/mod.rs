@@ -1,4 +1,4 @@
-//! The three processes of the pipeline (DESIGN.md section 2) and what they
+//! The three processes of the pipeline (README.md, "The pipeline") and what they
 //! share: the run's identity and directory, stop signals, peer watching.
 //!
 //! - [`sim`]: steps the batch on each action batch, writing observations
@@ -29,6 +29,7 @@ use shm_schemas::service::{RunName, list_nodes, run_config};
 
 pub mod learner;
 pub mod planner;
+pub mod shm_env;
 pub mod sim;
 
 /// iceoryx2 node name of the simulator process.

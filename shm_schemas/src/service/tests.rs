@@ -209,6 +209,36 @@ fn obs_roundtrip_to_two_subscribers() {
     assert!(planner_sub.receive().unwrap().is_none());
 }
 
+/// Debug builds fill every loan with [`crate::SENTINEL_BYTE`], so a writer
+/// that forgets a cell shows it to the reader instead of last batch's stale
+/// byte. Release builds skip the fill; `make test` runs this crate once
+/// with debug assertions, so this is checked.
+#[test]
+#[cfg_attr(not(debug_assertions), ignore = "the sentinel fill is debug-only")]
+fn a_debug_build_fills_each_loan_with_the_sentinel() {
+    let _w = Watchdog::arm("a_debug_build_fills_each_loan_with_the_sentinel");
+    let t = TestPrefix::new("sentinel");
+    let shape = ObsShape::new(2, 3, 3).unwrap();
+    let (sim, learner) = (node(&t, "sim"), node(&t, "learner"));
+    let subscriber = learner.obs_subscriber(shape).unwrap();
+    let publisher = sim.obs_publisher(shape).unwrap();
+    for seq in 0..3 {
+        let mut sample = publisher.loan(seq, 0).unwrap();
+        let batch = sample.batch_mut();
+        batch.meta.fill(EnvMeta::EMPTY);
+        // The writer "forgets" every cell but the first.
+        batch.cells[0] = 1;
+        sample.send().unwrap();
+        let got = poll("obs batch", || subscriber.receive().unwrap());
+        let cells = got.batch().cells;
+        assert_eq!(cells[0], 1);
+        assert!(
+            cells[1..].iter().all(|&c| c == crate::SENTINEL_BYTE),
+            "batch {seq}: unwritten cells hold the sentinel: {cells:?}"
+        );
+    }
+}
+
 #[test]
 fn act_roundtrip() {
     let _w = Watchdog::arm("act_roundtrip");

@@ -1,11 +1,15 @@
 //! The shared-memory client of the pipeline: a [`BatchEnvironment`] whose
-//! environments live in the sim process (DESIGN.md section 2).
+//! environments live in the sim process (README.md, "The pipeline").
 //!
 //! Observation batches are read **in place**: [`ShmEnv::observe`] borrows the
 //! received iceoryx2 sample, and the chunk goes back to the simulator when the
-//! next batch replaces it. The protocol is lock-step: action batch `k` answers
-//! observation batch `k`, and the simulator publishes batch `k + 1` only
-//! after receiving it, so no batch is ever lost between the two.
+//! next batch replaces it. Action batch `k` answers observation sample `k`.
+//! Each slice of the batch is lock-step: the simulator publishes a slice's
+//! next sample only after receiving the actions for its last one, so no
+//! sample is ever lost between the two. With one slice (`discover
+//! --pipeline`, `train --pipeline`) the whole batch is lock-step; with `K`
+//! slices (`learner serve`) up to `K` samples await their actions at once,
+//! and sample `k` holds slice `k mod K`.
 //!
 //! While waiting, the client watches the sim's iceoryx2 node: when the sim
 //! process is gone (dead node, or no node at all) for longer than
@@ -24,7 +28,7 @@ use shm_schemas::service::{
 };
 use shm_schemas::{Backoff, ObsShape, SeqEvent, SeqTracker};
 
-use crate::batch_env::{BatchEnvironment, EnvError, ObsView};
+use learner::batch_env::{BatchEnvironment, EnvError, ObsView};
 
 /// Settings of the client.
 #[derive(Debug, Clone)]
