@@ -130,7 +130,7 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     assert!(md.contains("| small | 3840 | 1920 | 2 |"), "{md}");
     assert!(md.contains("## Time to score"), "{md}");
     for f in [
-        "docs/figures/fig4-small-multigoal.png",
+        "docs/figures/fig4-small-multigoal-pi-g-init.png",
         "docs/figures/time-to-score-small-multigoal.png",
     ] {
         let png = std::fs::read(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));

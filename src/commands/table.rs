@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
-use sim::chart::{LineChart, Series, XScale};
+use crate::chart::{Band, LineChart, Series, XScale, band_chart};
 use sim::render::write_atomic;
 
 use crate::results::{RunResult, read_all_runs};
@@ -330,8 +330,8 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let _ = writeln!(
         md,
         "## Time to score\n\n\
-         For each maze and task the threshold is {:.0} % of the best validation score any \
-         configuration reached there; a seed's time to score is the env steps (and training wall \
+         For each maze and task the threshold is {:.0} % of the best cell's mean (over its \
+         seeds) of the runs' best validation scores; a seed's time to score is the env steps (and training wall \
          seconds) at its first validation at or above it. `k/n` seeds reached it; mean ± std are \
          over those k. The figures plot the share of seeds that reached the threshold against env \
          steps.\n",
@@ -344,10 +344,12 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut pairs: Vec<(String, String)> = cells.keys().map(|(m, t, _)| (m.clone(), t.clone())).collect();
     pairs.dedup();
     for (m, t) in &pairs {
-        let best = runs
+        // The best cell: the highest mean over seeds of the runs' best
+        // validation scores (one lucky seed does not set the bar).
+        let best = cells
             .iter()
-            .filter(|r| &r.maze == m && &r.task == t)
-            .map(|r| r.best_validation)
+            .filter(|((cm, ct, _), _)| cm == m && ct == t)
+            .map(|(_, rs)| mean_std(&rs.iter().map(|r| r.best_validation).collect::<Vec<_>>()).0)
             .fold(f64::NEG_INFINITY, f64::max);
         if best <= 0.0 {
             let _ = writeln!(md, "| {m} | {t} | — | every configuration | 0 | — | — |");
@@ -355,8 +357,13 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         let threshold = a.threshold * best;
         let mut reach_series = Vec::new();
-        for ((cm, ct, c), rs) in cells.iter().filter(|((cm, ct, _), _)| cm == m && ct == t) {
-            let _ = (cm, ct);
+        let mut here: Vec<(&String, &Vec<&RunResult>)> = cells
+            .iter()
+            .filter(|((cm, ct, _), _)| cm == m && ct == t)
+            .map(|((_, _, c), rs)| (c, rs))
+            .collect();
+        here.sort_by_key(|(c, _)| TABLE1_CONFIGS.iter().position(|x| x == c).unwrap_or(usize::MAX));
+        for (c, rs) in here {
             let reached: Vec<(u64, f64)> = rs.iter().filter_map(|r| first_reach(r, threshold)).collect();
             let (steps, wall) = if reached.is_empty() {
                 ("—".to_string(), "—".to_string())
@@ -379,20 +386,24 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
                 .collect();
             xs.sort_unstable();
             xs.dedup();
+            // A step line: the share holds until the next validation.
+            let mut points = Vec::new();
+            for &x in &xs {
+                let k = reached.iter().filter(|r| r.0 <= x).count();
+                let y = k as f64 / rs.len() as f64;
+                if let Some(&(_, prev)) = points.last() {
+                    points.push((x as f64, prev));
+                }
+                points.push((x as f64, y));
+            }
             reach_series.push(Series {
-                name: c.clone(),
-                points: xs
-                    .iter()
-                    .map(|&x| {
-                        let k = reached.iter().filter(|r| r.0 <= x).count();
-                        (x as f64, k as f64 / rs.len() as f64)
-                    })
-                    .collect(),
+                name: display_config(c),
+                points,
             });
         }
         let file = format!("time-to-score-{m}-{t}.png");
         LineChart {
-            title: format!("{m} {t}: seeds at {:.0} % of the best ({threshold:.2})", 100.0 * a.threshold),
+            title: format!("{m} {t}: seeds at the threshold {threshold:.2}"),
             x_label: "env steps".into(),
             y_label: "share of seeds".into(),
             series: reach_series,
@@ -414,37 +425,38 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let _ = writeln!(
         md,
         "## Validation curves (the paper's Figure 4)\n\n\
-         Validation score against env steps, mean over seeds with the band of ± one std: \
-         `V_p` against `V_rand`, with and without traversal and `π_g` initialisation.\n"
+         Validation score against env steps, the mean over seeds with a band of ± one (sample) \
+         std: `V_p` against `V_rand` with `π_g` initialisation, with traversal, and with both; \
+         then `π_g` initialisation against none.\n"
     );
     for (m, t) in &pairs {
-        let groups: [(&str, [&str; 2]); 3] = [
-            ("init", ["wn-random-init", "wn-pivotal-init"]),
-            ("trav", ["wn-random-trav", "wn-pivotal-trav"]),
-            ("trav-init", ["wn-random-trav-init", "wn-pivotal-trav-init"]),
-        ];
-        let mut series = Vec::new();
-        for (_, pair) in groups {
-            for c in pair {
-                if let Some(rs) = cells.get(&(m.clone(), t.clone(), c.to_string())) {
-                    series.push(mean_curve(c, rs));
-                }
+        let mut links = Vec::new();
+        for (what, title, configs) in FIGURE4 {
+            let bands: Vec<Band> = configs
+                .iter()
+                .filter_map(|c| {
+                    cells
+                        .get(&(m.clone(), t.clone(), c.to_string()))
+                        .map(|rs| mean_band(&display_config(c), rs))
+                })
+                .collect();
+            if bands.is_empty() {
+                continue;
             }
+            let file = format!("fig4-{m}-{t}-{what}.png");
+            let chart = LineChart {
+                title: format!("{m} {t}: {title}"),
+                x_label: "env steps".into(),
+                y_label: "validation score".into(),
+                series: Vec::new(),
+                x_scale: XScale::Linear,
+            };
+            band_chart(&chart, &bands, 720, 440).save_png(&figures.join(&file))?;
+            links.push(format!("![{m} {t}: {title}]({fig_link}/{file})"));
         }
-        if series.is_empty() {
-            continue;
+        if !links.is_empty() {
+            let _ = writeln!(md, "### {m}, {t}\n\n{}\n", links.join("\n"));
         }
-        let file = format!("fig4-{m}-{t}.png");
-        LineChart {
-            title: format!("{m} {t}: validation score, V_p against V_rand"),
-            x_label: "env steps".into(),
-            y_label: "validation score".into(),
-            series,
-            x_scale: XScale::Linear,
-        }
-        .render(900, 520)
-        .save_png(&figures.join(&file))?;
-        let _ = writeln!(md, "![validation curves, {m} {t}]({fig_link}/{file})\n");
     }
     write_atomic(&a.out, md.as_bytes())?;
     eprintln!(
@@ -457,16 +469,33 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     Ok(std::process::ExitCode::SUCCESS)
 }
 
-/// The mean validation curve of a cell's seeds, at the env steps all of
-/// them reached.
-fn mean_curve(name: &str, rs: &[&RunResult]) -> Series {
+/// The comparisons of the Figure 4 curves: file suffix, title, cells.
+const FIGURE4: [(&str, &str, &[&str]); 4] = [
+    ("init", "V_p against V_rand, π_g init", &["wn-random-init", "wn-pivotal-init"]),
+    ("trav", "V_p against V_rand, traversal", &["wn-random-trav", "wn-pivotal-trav"]),
+    (
+        "trav-init",
+        "V_p against V_rand, traversal + π_g init",
+        &["wn-random-trav-init", "wn-pivotal-trav-init"],
+    ),
+    (
+        "pi-g-init",
+        "π_g init against none",
+        &["fn", "fn-init", "wn-pivotal-trav", "wn-pivotal-trav-init"],
+    ),
+];
+
+/// The mean validation curve of a cell's seeds with ± one sample std, at
+/// the env steps every seed reached.
+fn mean_band(name: &str, rs: &[&RunResult]) -> Band {
     let len = rs.iter().map(|r| r.validation_curve.len()).min().unwrap_or(0);
-    Series {
+    Band {
         name: format!("{name} (n={})", rs.len()),
         points: (0..len)
             .map(|i| {
                 let ys: Vec<f64> = rs.iter().map(|r| r.validation_curve[i].score).collect();
-                (rs[0].validation_curve[i].env_steps as f64, mean_std(&ys).0)
+                let (m, s) = mean_std(&ys);
+                (rs[0].validation_curve[i].env_steps as f64, m, m - s, m + s)
             })
             .collect(),
     }
