@@ -326,6 +326,50 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         let _ = writeln!(md);
     }
 
+    // What each cell cost.
+    let _ = writeln!(
+        md,
+        "## Budget per cell\n\nMean training wall seconds per run (env steps per run: the budgets \
+         above; training env-steps/s in brackets).\n"
+    );
+    let tasks_here: Vec<&str> = TABLE1_TASKS
+        .iter()
+        .chain(std::iter::once(&"doorkey"))
+        .copied()
+        .filter(|t| runs.iter().any(|r| r.task == *t))
+        .collect();
+    let mut head = "| configuration |".to_string();
+    let mut rule = "|---|".to_string();
+    for t in &tasks_here {
+        for m in &mazes {
+            let _ = write!(head, " {t}, {m} |");
+            rule.push_str("---:|");
+        }
+    }
+    let _ = writeln!(md, "{head}\n{rule}");
+    for c in TABLE1_CONFIGS {
+        let mut line = format!("| {} |", display_config(c));
+        for t in &tasks_here {
+            for m in &mazes {
+                let k = (m.to_string(), t.to_string(), c.to_string());
+                let text = match cells.get(&k) {
+                    Some(rs) if !rs.is_empty() => {
+                        let n = rs.len() as f64;
+                        format!(
+                            "{:.0} ({:.0})",
+                            rs.iter().map(|r| r.wall_seconds).sum::<f64>() / n,
+                            rs.iter().map(|r| r.train_steps_per_sec).sum::<f64>() / n
+                        )
+                    }
+                    _ => "—".to_string(),
+                };
+                let _ = write!(line, " {text} |");
+            }
+        }
+        let _ = writeln!(md, "{line}");
+    }
+    let _ = writeln!(md);
+
     // Time to score.
     let _ = writeln!(
         md,
