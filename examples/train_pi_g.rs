@@ -1,5 +1,5 @@
 //! Train the goal-conditioned policy `π_g` (section 3.2 of the paper) for
-//! 400 A2C iterations in a 5×5 room: goals are the ends of 4-move random
+//! 400 A2C iterations in two small rooms: goals are the ends of 4-move random
 //! walks, and the greedy policy's success on goals of another seed is
 //! measured before and after.
 //!
@@ -7,25 +7,25 @@
 
 use learner::batch_env::InProcess;
 use learner::gcp::{GcpConfig, GoalConditionedPolicy};
-use sim::{AutoReset, BallSpawn, EnvConfig, Layout, Task};
+use sim::{BallSpawn, EnvConfig, Layout, Task};
 
-const ROOM: &str = "\
-#######
-#.....#
-#.....#
-#..>..#
-#.....#
-#....E#
-#######
+/// Two rooms joined by a doorway; goals may lie on either side.
+const ROOMS: &str = "\
+#########
+#...#...#
+#...#...#
+#>......#
+#...#...#
+#...#..E#
+#########
 ";
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let layout = Layout::parse("room", ROOM)?;
+    let layout = Layout::parse("two rooms", ROOMS)?;
+    // MultiGoal's rules without its random balls: π_g's rewards are its goals.
     let env_cfg = EnvConfig {
-        task: Task::MultiGoal,
-        max_steps: 200,
         balls: BallSpawn::Layout,
-        auto_reset: AutoReset::SameStep,
+        ..EnvConfig::for_task(Task::MultiGoal, &layout)
     };
     let (envs, seed, walk_len) = (32, 1, 4);
     let cfg = GcpConfig {
