@@ -11,11 +11,11 @@ demo: libtorch
 # Every test of the workspace (unit, property, multi-process, tch training);
 # then the IPC and simulator crates once more with debug assertions on (the
 # loan sentinel, debug_assert!s; profile debug-asserts in Cargo.toml), and
-# the benches, which must keep compiling.
+# the benches and examples, which must keep compiling.
 test: libtorch
 	$(CARGO) test --release --workspace --no-fail-fast
 	$(CARGO) test --profile debug-asserts -p shm_schemas -p sim --no-fail-fast
-	$(CARGO) build --release --workspace --benches
+	$(CARGO) build --release --workspace --benches --examples
 
 libtorch:
 	@./scripts/setup-libtorch.sh >/dev/null

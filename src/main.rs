@@ -12,6 +12,7 @@ use clap::{Parser, Subcommand};
 mod chart;
 mod commands;
 mod latency;
+mod output;
 mod pipeline;
 mod progress;
 mod results;

@@ -358,3 +358,59 @@ fn a_role_pinned_to_a_cpu_it_may_not_use_is_refused_naming_the_allowed_ones() {
         "{stderr}"
     );
 }
+
+/// `sim render --png` into a folder that does not exist yet creates it and
+/// says so; a path through a regular file, or one naming a folder, is
+/// refused before anything is drawn, with a message naming the path.
+#[test]
+fn png_paths_get_their_folder_or_a_clear_refusal() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |png: &Path| {
+        worldgraph(&[
+            "sim",
+            "render",
+            "--maze",
+            "small",
+            "--png",
+            png.to_str().unwrap(),
+        ])
+    };
+    let stderr = |out: &Output| String::from_utf8_lossy(&out.stderr).into_owned();
+
+    let nested = dir.path().join("new").join("sub").join("maze.png");
+    let out = render(&nested);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(nested.is_file(), "the picture is written");
+    assert!(
+        stderr(&out).contains(&format!(
+            "--png: created the folder {}",
+            nested.parent().unwrap().display()
+        )),
+        "the new folder is reported: {}",
+        stderr(&out)
+    );
+
+    let file = dir.path().join("notes.txt");
+    std::fs::write(&file, "a file").unwrap();
+    let through = file.join("maze.png");
+    let out = render(&through);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert_eq!(
+        stderr(&out).trim(),
+        format!(
+            "error: --png {}: {} is a file, not a folder",
+            through.display(),
+            file.display()
+        )
+    );
+    assert!(out.stdout.is_empty(), "nothing was drawn");
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "a file");
+
+    let out = render(dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&format!("--png {}: is a folder", dir.path().display())),
+        "{}",
+        stderr(&out)
+    );
+}

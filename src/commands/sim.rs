@@ -65,6 +65,9 @@ pub fn run(cmd: SimCommand) -> anyhow::Result<std::process::ExitCode> {
 fn render_cmd(a: RenderArgs) -> anyhow::Result<()> {
     anyhow::ensure!(a.batch >= 1, "--batch must be at least 1");
     anyhow::ensure!((2..=64).contains(&a.cell_px), "--cell-px must be in 2..=64");
+    if let Some(path) = &a.png {
+        crate::output::prepare("--png", path)?;
+    }
     let (layout, cfg) = a.world.build()?;
     let (w, h) = (layout.width, layout.height);
     let mut batch = BatchEnv::new(layout, cfg, a.batch, a.world.seed, 1)?;

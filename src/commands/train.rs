@@ -981,6 +981,9 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         a.episodes_per_seed > 0,
         "--episodes-per-seed must be at least 1"
     );
+    if let Some(path) = &a.picture {
+        crate::output::prepare("--picture", path)?;
+    }
     let state_path = a.run.join("checkpoint").join("state.json");
     let state: RunState =
         serde_json::from_slice(&std::fs::read(&state_path).with_context(|| {
