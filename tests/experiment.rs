@@ -19,7 +19,11 @@ fn worldgraph(dir: &Path, args: &[&str]) -> Output {
 
 fn ok(out: &Output) -> (String, String) {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "status {:?}\nstderr: {stderr}", out.status);
+    assert!(
+        out.status.success(),
+        "status {:?}\nstderr: {stderr}",
+        out.status
+    );
     (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
 }
 
@@ -55,7 +59,10 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     )
     .unwrap();
     let (_, err) = ok(&worldgraph(d, &["experiment", "grid.toml", "--jobs", "2"]));
-    assert!(err.contains("2 training runs (0 done, 2 to run), 1 discoveries to run"), "{err}");
+    assert!(
+        err.contains("2 training runs (0 done, 2 to run), 1 discoveries to run"),
+        "{err}"
+    );
 
     let wn = json(&d.join("results/small/multigoal/wn-pivotal-trav-init/seed-0.json"));
     let a2c = json(&d.join("results/small/multigoal/a2c/seed-0.json"));
@@ -86,7 +93,10 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     // A restart runs nothing: every run has its summary.
     let before = std::fs::read(d.join("results/small/multigoal/a2c/seed-0.json")).unwrap();
     let (_, err) = ok(&worldgraph(d, &["experiment", "grid.toml"]));
-    assert!(err.contains("(2 done, 0 to run), 0 discoveries to run"), "{err}");
+    assert!(
+        err.contains("(2 done, 0 to run), 0 discoveries to run"),
+        "{err}"
+    );
     assert!(err.contains("0 runs finished, 0 failed"), "{err}");
     assert_eq!(
         std::fs::read(d.join("results/small/multigoal/a2c/seed-0.json")).unwrap(),
@@ -113,13 +123,22 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     std::fs::write(d.join("edited.json"), serde_json::to_vec(&bad).unwrap()).unwrap();
     let err = refused(&worldgraph(
         d,
-        &["experiment", "--reproduce", "edited.json", "--work", "edited"],
+        &[
+            "experiment",
+            "--reproduce",
+            "edited.json",
+            "--work",
+            "edited",
+        ],
     ));
     assert!(err.contains("differs"), "{err}");
 
     // The tables: each run's cell beside the paper's value, the budget, the
     // time to score and the curves.
-    ok(&worldgraph(d, &["table", "results", "--out", "docs/results.md"]));
+    ok(&worldgraph(
+        d,
+        &["table", "results", "--out", "docs/results.md"],
+    ));
     let md = std::fs::read_to_string(d.join("docs/results.md")).unwrap();
     let a2c_cell = format!(
         "| A2C | {:.3} ± 0.000 (n=1) | 2.04 |",
@@ -145,7 +164,10 @@ fn a_stopped_grid_resumes_to_the_uninterrupted_result() {
     // Six iterations, three validations: long enough to stop in between.
     std::fs::write(d.join("whole.toml"), grid("whole", 11520, "\"a2c\"")).unwrap();
     std::fs::write(d.join("stopped.toml"), grid("stopped", 11520, "\"a2c\"")).unwrap();
-    ok(&worldgraph(d, &["experiment", "whole.toml", "--results", "whole"]));
+    ok(&worldgraph(
+        d,
+        &["experiment", "whole.toml", "--results", "whole"],
+    ));
 
     let child = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
         .args(["experiment", "stopped.toml", "--results", "stopped"])
@@ -175,7 +197,10 @@ fn a_stopped_grid_resumes_to_the_uninterrupted_result() {
         assert!(err.contains("stopped"), "{err}");
     }
     // Its run was stopped with it: the run directory is free again.
-    let (_, err) = ok(&worldgraph(d, &["experiment", "stopped.toml", "--results", "stopped"]));
+    let (_, err) = ok(&worldgraph(
+        d,
+        &["experiment", "stopped.toml", "--results", "stopped"],
+    ));
     assert!(!err.contains("in use"), "{err}");
     let whole = json(&d.join("whole/small/multigoal/a2c/seed-0.json"));
     let stopped = json(&d.join("stopped/small/multigoal/a2c/seed-0.json"));
@@ -196,13 +221,32 @@ fn bad_grids_are_refused_naming_what_is_wrong() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let cases = [
-        (grid("g", 3840, "\"wn-best\""), "unknown configuration \"wn-best\""),
+        (
+            grid("g", 3840, "\"wn-best\""),
+            "unknown configuration \"wn-best\"",
+        ),
         (grid("g", 3840, "\"wn-all-trav\""), "traversal"),
-        (grid("g", 3840, "\"a2c\"").replace("seeds = [0]", "seeds = []"), "at least one training seed"),
-        (grid("g", 3840, "\"a2c\"").replace("table = 1", "table = 1\nmazes = [\"large\"]"), "group maze large has no [[maze]] budget"),
-        (grid("g", 3840, "\"a2c\"").replace("discover_rounds = 1", "discover_rounds = 1\nepochs = 3"), "unknown field `epochs`"),
-        (grid("g", 3840, "\"a2c\"").replace("\"multigoal\"", "\"multi\""), "multi"),
-        (grid("g", 3840, "\"a2c\"").replace("name = \"g\"", "name = \"../g\""), "must be letters"),
+        (
+            grid("g", 3840, "\"a2c\"").replace("seeds = [0]", "seeds = []"),
+            "at least one training seed",
+        ),
+        (
+            grid("g", 3840, "\"a2c\"").replace("table = 1", "table = 1\nmazes = [\"large\"]"),
+            "group maze large has no [[maze]] budget",
+        ),
+        (
+            grid("g", 3840, "\"a2c\"")
+                .replace("discover_rounds = 1", "discover_rounds = 1\nepochs = 3"),
+            "unknown field `epochs`",
+        ),
+        (
+            grid("g", 3840, "\"a2c\"").replace("\"multigoal\"", "\"multi\""),
+            "multi",
+        ),
+        (
+            grid("g", 3840, "\"a2c\"").replace("name = \"g\"", "name = \"../g\""),
+            "must be letters",
+        ),
     ];
     for (text, what) in cases {
         std::fs::write(d.join("bad.toml"), &text).unwrap();

@@ -69,7 +69,10 @@ fn train(a: &mut HrlAgent, segment: u64, iterations: usize) -> f64 {
     a.start_segment(&mut e, segment).expect("segment");
     let mut share = 0.0;
     for _ in 0..iterations {
-        share += a.train_iteration(&mut e).expect("iteration").traversal_share;
+        share += a
+            .train_iteration(&mut e)
+            .expect("iteration")
+            .traversal_share;
     }
     share / iterations as f64
 }
@@ -87,7 +90,11 @@ fn pi_g_is_fine_tuned_on_the_steps_it_steers_and_checkpointed() {
         .zip(&after)
         .filter(|((_, x), (_, y))| !x.equal(y))
         .count();
-    assert!(moved > before.len() / 2, "{moved} of {} tensors moved", before.len());
+    assert!(
+        moved > before.len() / 2,
+        "{moved} of {} tensors moved",
+        before.len()
+    );
 
     // A restored agent trains on exactly as the original.
     let mut b = agent(true);

@@ -431,10 +431,7 @@ fn train_command(
     let dir = plan.train_dir(maze, task, config, seed);
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let cfg_file = dir.join("grid-config.toml");
-    write_atomic(
-        &cfg_file,
-        toml::to_string(cfg)?.as_bytes(),
-    )?;
+    write_atomic(&cfg_file, toml::to_string(cfg)?.as_bytes())?;
     let mut cmd = Command::new(exe()?);
     cmd.args(["train", "--maze", maze.name(), "--task", task.name()])
         .args(ConfigName::parse(config)?.train_args())
@@ -492,9 +489,8 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
     match job {
         Job::Discover { spec } => {
             let dir = plan.discover_dir(spec);
-            let summary = discovery_done(&dir, spec).with_context(|| {
-                format!("{} finished without its summary", dir.display())
-            })?;
+            let summary = discovery_done(&dir, spec)
+                .with_context(|| format!("{} finished without its summary", dir.display()))?;
             let r = DiscoverResult {
                 schema: RESULT_SCHEMA,
                 spec: spec.clone(),
@@ -526,7 +522,16 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
                 seed: *seed,
                 rounds: plan.grid.budget(*maze).expect("checked").discover_rounds,
             });
-            let r = run_result(plan, *maze, *task, config, *seed, train_config, discover, &t);
+            let r = run_result(
+                plan,
+                *maze,
+                *task,
+                config,
+                *seed,
+                train_config,
+                discover,
+                &t,
+            );
             let path = run_path(&plan.results, maze.name(), task.name(), config, *seed);
             write_result(&path, &serde_json::to_vec_pretty(&r)?)
         }
@@ -568,7 +573,11 @@ fn run_result(
             .enumerate()
             .map(|(i, &(env_steps, score))| CurvePoint {
                 env_steps,
-                wall_seconds: t.validation_wall_seconds.get(i).copied().unwrap_or(f64::NAN),
+                wall_seconds: t
+                    .validation_wall_seconds
+                    .get(i)
+                    .copied()
+                    .unwrap_or(f64::NAN),
                 score,
             })
             .collect(),
@@ -608,7 +617,11 @@ fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
             g.mazes.clone()
         };
         for maze in mazes.into_iter().filter(|&m| keep_maze(m)) {
-            for &task in g.tasks.iter().filter(|t| a.tasks.is_empty() || a.tasks.contains(t)) {
+            for &task in g
+                .tasks
+                .iter()
+                .filter(|t| a.tasks.is_empty() || a.tasks.contains(t))
+            {
                 for config in g
                     .configs
                     .iter()
@@ -784,7 +797,11 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
                             done_now += 1;
                             crate::progress::note(
                                 &bar,
-                                &format!("done {} ({secs:.0} s){}", Plan::label(job), score_note(&plan, job)),
+                                &format!(
+                                    "done {} ({secs:.0} s){}",
+                                    Plan::label(job),
+                                    score_note(&plan, job)
+                                ),
                             );
                         }
                         Err(e) => {
@@ -814,7 +831,10 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
                     Some(Some(std::fs::canonicalize(plan.discover_dir(spec))?))
                 }
                 Job::Train { needs: Some(n), .. } if is_failed(&failed, *n) => {
-                    failed.push((i, format!("its discovery ({}) failed", Plan::label(&all[*n]))));
+                    failed.push((
+                        i,
+                        format!("its discovery ({}) failed", Plan::label(&all[*n])),
+                    ));
                     bar.inc(1);
                     queue.remove(k);
                     continue;
@@ -850,7 +870,10 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
         if running.is_empty() && queue.is_empty() {
             break;
         }
-        let names: Vec<String> = running.iter().map(|(i, _, _)| Plan::label(&all[*i])).collect();
+        let names: Vec<String> = running
+            .iter()
+            .map(|(i, _, _)| Plan::label(&all[*i]))
+            .collect();
         bar.set_message(format!(
             "done {done_now}, running {} [{}], left {}, failed {}",
             running.len(),
@@ -916,7 +939,10 @@ fn reproduce(summary: &Path, a: &ExperimentArgs) -> anyhow::Result<std::process:
         .parse()
         .map_err(|e| anyhow::anyhow!("{}: task {:?}: {e}", summary.display(), r.task))?;
     let work = a.work.clone().unwrap_or_else(|| {
-        PathBuf::from("runs/reproduce").join(format!("{}-{}-{}-seed-{}", r.maze, r.task, r.config, r.seed))
+        PathBuf::from("runs/reproduce").join(format!(
+            "{}-{}-{}-seed-{}",
+            r.maze, r.task, r.config, r.seed
+        ))
     });
     let grid = Grid {
         name: "reproduce".to_string(),
@@ -944,15 +970,35 @@ fn reproduce(summary: &Path, a: &ExperimentArgs) -> anyhow::Result<std::process:
         Some(spec) => {
             let dir = plan.discover_dir(spec);
             if discovery_done(&dir, spec).is_none() {
-                eprintln!("reproduce: discovering the world graph ({} rounds)", spec.rounds);
+                eprintln!(
+                    "reproduce: discovering the world graph ({} rounds)",
+                    spec.rounds
+                );
                 let job = Job::Discover { spec: spec.clone() };
-                wait_ok(start(discover_command(&plan, spec)?, &plan.log_path(&job), plan.threads)?, &plan.log_path(&job))?;
+                wait_ok(
+                    start(
+                        discover_command(&plan, spec)?,
+                        &plan.log_path(&job),
+                        plan.threads,
+                    )?,
+                    &plan.log_path(&job),
+                )?;
             }
             Some(std::fs::canonicalize(&dir)?)
         }
         None => None,
     };
-    eprintln!("reproduce: training {} in {}", Plan::label(&Job::Train { maze, task, config: r.config.clone(), seed: r.seed, needs: None }), work.display());
+    eprintln!(
+        "reproduce: training {} in {}",
+        Plan::label(&Job::Train {
+            maze,
+            task,
+            config: r.config.clone(),
+            seed: r.seed,
+            needs: None
+        }),
+        work.display()
+    );
     let job = Job::Train {
         maze,
         task,

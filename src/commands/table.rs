@@ -9,9 +9,9 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::chart::{Band, LineChart, Series, XScale, band_chart};
 use anyhow::Context;
 use clap::Args;
-use crate::chart::{Band, LineChart, Series, XScale, band_chart};
 use sim::render::write_atomic;
 
 use crate::results::{RunResult, read_all_runs};
@@ -80,10 +80,50 @@ const PAPER_TABLE1: [[Option<f64>; 9]; 10] = {
         [v(4.73), v(4.71), F, v(0.32), F, F, v(2.59), v(1.62), F],
         [v(3.67), v(4.72), F, v(0.36), F, F, v(2.82), F, F],
         [v(5.25), v(5.15), F, v(0.39), F, F, v(3.06), v(2.99), F],
-        [v(3.85), v(2.59), v(1.65), v(0.17), v(0.19), v(0.20), F, v(1.67), F],
-        [v(3.92), v(2.56), v(2.18), v(0.24), v(0.20), v(0.16), F, v(2.42), v(1.05)],
-        [v(4.16), v(3.29), v(2.30), v(0.25), v(0.24), v(0.19), v(2.72), v(2.42), v(1.93)],
-        [v(5.05), v(3.00), v(2.72), v(0.42), v(0.25), v(0.26), v(2.92), v(2.62), v(1.79)],
+        [
+            v(3.85),
+            v(2.59),
+            v(1.65),
+            v(0.17),
+            v(0.19),
+            v(0.20),
+            F,
+            v(1.67),
+            F,
+        ],
+        [
+            v(3.92),
+            v(2.56),
+            v(2.18),
+            v(0.24),
+            v(0.20),
+            v(0.16),
+            F,
+            v(2.42),
+            v(1.05),
+        ],
+        [
+            v(4.16),
+            v(3.29),
+            v(2.30),
+            v(0.25),
+            v(0.24),
+            v(0.19),
+            v(2.72),
+            v(2.42),
+            v(1.93),
+        ],
+        [
+            v(5.05),
+            v(3.00),
+            v(2.72),
+            v(0.42),
+            v(0.25),
+            v(0.26),
+            v(2.92),
+            v(2.62),
+            v(1.79),
+        ],
     ]
 };
 
@@ -95,8 +135,24 @@ const PAPER_TABLE2: [[Option<(f64, f64)>; 7]; 3] = {
         Some((m, s))
     }
     [
-        [v(94., 5.), v(97., 2.), v(99., 0.), F, v(37., 15.), v(76., 14.), v(92., 2.)],
-        [v(25., 15.), v(1., 1.), v(56., 2.), F, F, v(79., 11.), v(76., 6.)],
+        [
+            v(94., 5.),
+            v(97., 2.),
+            v(99., 0.),
+            F,
+            v(37., 15.),
+            v(76., 14.),
+            v(92., 2.),
+        ],
+        [
+            v(25., 15.),
+            v(1., 1.),
+            v(56., 2.),
+            F,
+            F,
+            v(79., 11.),
+            v(76., 6.),
+        ],
         [F, F, F, F, F, v(27., 40.), v(26., 19.)],
     ]
 };
@@ -272,8 +328,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         "\nThe paper's budget is taken as 100k iterations × {} agents × a rollout of {} steps \
          (this repository's rollout; the paper's main text does not state its own). Wall times \
          are on the 2-core machine with `jobs` runs side by side (each summary records it).\n",
-        runs[0].train_config.agent.envs,
-        runs[0].train_config.agent.rollout_len
+        runs[0].train_config.agent.envs, runs[0].train_config.agent.rollout_len
     );
 
     // Table 1.
@@ -283,7 +338,10 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         .filter(|t| runs.iter().any(|r| r.task == *t))
         .collect();
     if !t1_tasks.is_empty() {
-        let _ = writeln!(md, "## Table 1: MultiGoal, MultiGoal-Sparse, MultiGoal-Stochastic (mean test reward)\n");
+        let _ = writeln!(
+            md,
+            "## Table 1: MultiGoal, MultiGoal-Sparse, MultiGoal-Stochastic (mean test reward)\n"
+        );
         for t in &t1_tasks {
             let _ = writeln!(md, "### {t}\n");
             let mut head = "| configuration |".to_string();
@@ -297,7 +355,12 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
                 let mut line = format!("| {} |", display_config(c));
                 for m in &mazes {
                     let k = (m.to_string(), t.to_string(), c.to_string());
-                    let _ = write!(line, " {} | {} |", cell_text(cells.get(&k), 1.0, 3), paper1(c, t, m));
+                    let _ = write!(
+                        line,
+                        " {} | {} |",
+                        cell_text(cells.get(&k), 1.0, 3),
+                        paper1(c, t, m)
+                    );
                 }
                 let _ = writeln!(md, "{line}");
             }
@@ -319,7 +382,12 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             let mut line = format!("| {m} |");
             for c in TABLE2_CONFIGS {
                 let k = (m.to_string(), "doorkey".to_string(), c.to_string());
-                let _ = write!(line, " {} | {} |", cell_text(cells.get(&k), 100.0, 0), paper2(c, m));
+                let _ = write!(
+                    line,
+                    " {} | {} |",
+                    cell_text(cells.get(&k), 100.0, 0),
+                    paper2(c, m)
+                );
             }
             let _ = writeln!(md, "{line}");
         }
@@ -385,7 +453,10 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         md,
         "| maze | task | threshold | configuration | reached | env steps | wall s |\n|---|---|---:|---|---:|---:|---:|"
     );
-    let mut pairs: Vec<(String, String)> = cells.keys().map(|(m, t, _)| (m.clone(), t.clone())).collect();
+    let mut pairs: Vec<(String, String)> = cells
+        .keys()
+        .map(|(m, t, _)| (m.clone(), t.clone()))
+        .collect();
     pairs.dedup();
     for (m, t) in &pairs {
         // The best cell: the highest mean over seeds of the runs' best
@@ -406,9 +477,17 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             .filter(|((cm, ct, _), _)| cm == m && ct == t)
             .map(|((_, _, c), rs)| (c, rs))
             .collect();
-        here.sort_by_key(|(c, _)| TABLE1_CONFIGS.iter().position(|x| x == c).unwrap_or(usize::MAX));
+        here.sort_by_key(|(c, _)| {
+            TABLE1_CONFIGS
+                .iter()
+                .position(|x| x == c)
+                .unwrap_or(usize::MAX)
+        });
         for (c, rs) in here {
-            let reached: Vec<(u64, f64)> = rs.iter().filter_map(|r| first_reach(r, threshold)).collect();
+            let reached: Vec<(u64, f64)> = rs
+                .iter()
+                .filter_map(|r| first_reach(r, threshold))
+                .collect();
             let (steps, wall) = if reached.is_empty() {
                 ("—".to_string(), "—".to_string())
             } else {
@@ -515,8 +594,16 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
 
 /// The comparisons of the Figure 4 curves: file suffix, title, cells.
 const FIGURE4: [(&str, &str, &[&str]); 4] = [
-    ("init", "V_p against V_rand, π_g init", &["wn-random-init", "wn-pivotal-init"]),
-    ("trav", "V_p against V_rand, traversal", &["wn-random-trav", "wn-pivotal-trav"]),
+    (
+        "init",
+        "V_p against V_rand, π_g init",
+        &["wn-random-init", "wn-pivotal-init"],
+    ),
+    (
+        "trav",
+        "V_p against V_rand, traversal",
+        &["wn-random-trav", "wn-pivotal-trav"],
+    ),
     (
         "trav-init",
         "V_p against V_rand, traversal + π_g init",
@@ -532,7 +619,11 @@ const FIGURE4: [(&str, &str, &[&str]); 4] = [
 /// The mean validation curve of a cell's seeds with ± one sample std, at
 /// the env steps every seed reached.
 fn mean_band(name: &str, rs: &[&RunResult]) -> Band {
-    let len = rs.iter().map(|r| r.validation_curve.len()).min().unwrap_or(0);
+    let len = rs
+        .iter()
+        .map(|r| r.validation_curve.len())
+        .min()
+        .unwrap_or(0);
     Band {
         name: format!("{name} (n={})", rs.len()),
         points: (0..len)
@@ -572,7 +663,10 @@ fn display_config(c: &str) -> String {
 }
 
 fn join(xs: &std::collections::BTreeSet<u64>) -> String {
-    xs.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
+    xs.iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// `to` relative to `from` when it lies below it, else `to` as given.

@@ -884,12 +884,13 @@ impl HrlAgent {
                         next,
                     )
                 }
-                None => gcp.greedy_step(obs, &goals, &state).map_err(|e| {
-                    LearnerError::Checkpoint {
-                        path: "π_g".into(),
-                        message: e.to_string(),
-                    }
-                })?,
+                None => {
+                    gcp.greedy_step(obs, &goals, &state)
+                        .map_err(|e| LearnerError::Checkpoint {
+                            path: "π_g".into(),
+                            message: e.to_string(),
+                        })?
+                }
             };
             ctl.steer_state = Some(next);
             for (e, c) in ctl.envs.iter().enumerate() {
@@ -1347,9 +1348,7 @@ impl HrlAgent {
             o.load_state(&strip("manager-")).map_err(bad)?;
         }
         if let Some(s) = self.steering.as_mut() {
-            s.optimiser_mut()
-                .load_state(&strip("pi_g-"))
-                .map_err(bad)?;
+            s.optimiser_mut().load_state(&strip("pi_g-")).map_err(bad)?;
         }
         Ok(())
     }

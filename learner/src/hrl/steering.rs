@@ -149,17 +149,14 @@ mod tests {
     #[test]
     fn the_leg_outcomes_give_the_goal_episode_rewards() {
         let layout = sim::Maze::Small.layout(false);
-        let gcp = GoalConditionedPolicy::new(
-            &crate::gcp::GcpConfig::default(),
-            &layout,
-            1,
-            3,
-            0,
-        )
-        .unwrap();
+        let gcp = GoalConditionedPolicy::new(&crate::gcp::GcpConfig::default(), &layout, 1, 3, 0)
+            .unwrap();
         let mut s = Steering::new(&gcp, 4, layout.width, layout.height, 1.0, -0.01);
         s.start(&gcp.network().zero_state(4));
-        s.book(&[0, 1, 2, 0], &[Leg::Idle, Leg::Going, Leg::Reached, Leg::Ended]);
+        s.book(
+            &[0, 1, 2, 0],
+            &[Leg::Idle, Leg::Going, Leg::Reached, Leg::Ended],
+        );
         assert_eq!(s.rollout.rewards, vec![0.0, -0.01, 1.0, -0.01]);
         assert_eq!(s.rollout.dones, vec![1.0, 0.0, 1.0, 1.0]);
         assert_eq!(s.rollout.weights, vec![0.0, 1.0, 1.0, 1.0]);
