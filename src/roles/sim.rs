@@ -5,13 +5,12 @@
 //! `shm_schemas::service`).
 //!
 //! The one exception is the step records (reward, flags, agent; 20 bytes
-//! per environment, 4% of a sample on the medium maze): they are stepped
-//! into a private buffer and copied into the sample in one burst. The
-//! learner reads them from the other core, so each record's cache line
-//! belongs to the learner when the sim writes it again; written field by
-//! field while stepping, every write waited for the line, which cost a
-//! third of the stepping rate (measured on 2 vCPUs: 66M → 44M env-steps/s
-//! with a reader on the other core, 57M with the records staged).
+//! per environment): they are stepped into a private buffer and copied
+//! into the sample in one burst. The learner reads them from the other
+//! core, so each record's cache line belongs to the learner when the sim
+//! writes it again; written field by field while stepping, every write
+//! would wait for the line (the cost is measured in
+//! `docs/implementation_details.md`, "Pipeline throughput").
 //!
 //! With `--slices K` (default 2) the batch is `K` slices of `N / K`
 //! environments, published as separate samples, and up to `K` samples are
