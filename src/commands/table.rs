@@ -183,7 +183,11 @@ fn cell_text(runs: Option<&Vec<&RunResult>>, scale: f64, digits: usize) -> Strin
     };
     let fails = runs.iter().filter(|r| r.failed()).count();
     if fails == runs.len() {
-        return format!("Fail ({} seeds)", runs.len());
+        return if runs.len() == 3 {
+            "Fail".to_string()
+        } else {
+            format!("Fail (n={})", runs.len())
+        };
     }
     let scores: Vec<f64> = runs.iter().map(|r| r.test_score * scale).collect();
     let (m, s) = mean_std(&scores);
