@@ -167,6 +167,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         threads: 1,
         policy: PolicyKind::Random,
         route_every: a.route_every,
+        checkpoint_every: 10,
         logs_to_files: true,
         pin: false,
     };
