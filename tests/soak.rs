@@ -131,6 +131,9 @@ fn soak_with_a_training_learner_resumes_after_kills() {
     assert!(kept > at_first_kill, "kept {kept} ≤ {at_first_kill}: {t}");
     assert!(t["final_checkpoint_error"].is_null(), "{t}");
     assert!(t["checkpoints_written"].as_u64().unwrap() >= 2, "{t}");
+    // A sim kill always cuts a rollout (or the next one's first step).
+    let sim_kills = kills.iter().filter(|k| k["role"] == "sim").count() as u64;
+    assert!(t["rollouts_dropped"].as_u64().unwrap() >= sim_kills, "{t}");
     assert_eq!(
         t["iterations_run"].as_u64().unwrap(),
         kept + t["iterations_lost"].as_u64().unwrap(),

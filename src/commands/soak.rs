@@ -479,6 +479,7 @@ fn print_report(r: &SoakReport, dir: &Path) {
             ("iterations kept (final checkpoint)", t.iterations_kept),
             ("iterations lost to learner kills", t.iterations_lost),
             ("checkpoints written", t.checkpoints_written),
+            ("rollouts dropped (sim died)", t.rollouts_dropped),
             ("learner processes", t.learner_processes as u64),
         ] {
             println!("    {what:<32} {n:>12}");

@@ -57,6 +57,8 @@ pub struct TrainingReport {
     pub iterations_lost: u64,
     /// Checkpoints written by all learner processes.
     pub checkpoints_written: u64,
+    /// Rollouts dropped because the sim died or restarted during them.
+    pub rollouts_dropped: u64,
     /// Median seconds between two iterations of one process.
     pub median_iteration_s: f64,
     /// Why the final checkpoint could not be loaded (None: it loads).
@@ -69,6 +71,7 @@ struct ProcLog {
     resumed_from: u64,
     last_iteration: u64,
     checkpoints: u64,
+    dropped: u64,
     iteration_ms: Vec<u64>,
 }
 
@@ -97,6 +100,7 @@ fn read_log(path: &Path) -> BTreeMap<u64, ProcLog> {
                 p.last_iteration = it;
                 p.iteration_ms.push(ms);
             }
+            Some("dropped") => p.dropped += 1,
             _ => {}
         }
         p.checkpoints += u64::from(v["checkpointed"].as_bool() == Some(true));
@@ -193,6 +197,7 @@ pub fn analyse(
             .filter_map(|r| r.training.as_ref()?.iterations_lost)
             .sum(),
         checkpoints_written: procs.values().map(|p| p.checkpoints).sum(),
+        rollouts_dropped: procs.values().map(|p| p.dropped).sum(),
         median_iteration_s: gaps.get(gaps.len() / 2).map_or(f64::NAN, |&g| g as f64 / 1000.0),
         final_checkpoint_error,
     }

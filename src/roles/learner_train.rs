@@ -26,7 +26,10 @@
 //! - **A sim that dies during a rollout**: the partial rollout is dropped
 //!   (the next iteration's rollout starts afresh, goal episodes of moved
 //!   agents restart), the learner waits for a sim to rejoin and goes on;
-//!   the iteration count is unchanged.
+//!   the iteration count is unchanged. A sim restarted so quickly that the
+//!   stream only shows its batches starting over ([`ShmEnv`] counts a sim
+//!   restart) drops the rollout too ([`RestartGuard`]): no transition of
+//!   it spans two simulators. Each dropped rollout is a `dropped` line.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -35,7 +38,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use iceoryx2::prelude::ipc;
 use learner::LearnerError;
-use learner::batch_env::EnvError;
+use learner::batch_env::{BatchEnvironment, EnvError, ObsView};
 use learner::gcp::{GcpConfig, GoalConditionedPolicy};
 use serde::{Deserialize, Serialize};
 use sim::Layout;
@@ -145,6 +148,41 @@ pub fn open(
     Ok((gcp, state))
 }
 
+/// The stream as π_g's rollout sees it: a step after which the sim turns
+/// out to have restarted (its batches start over) fails, so the rollout
+/// that began on the old sim is dropped rather than stitched onto the new
+/// one.
+struct RestartGuard<'a> {
+    env: &'a mut ShmEnv<ipc::Service>,
+    restarts: u64,
+    restarted: bool,
+}
+
+impl BatchEnvironment for RestartGuard<'_> {
+    fn num_envs(&self) -> usize {
+        self.env.num_envs()
+    }
+    fn num_actions(&self) -> usize {
+        self.env.num_actions()
+    }
+    fn observe(&self) -> ObsView<'_> {
+        self.env.observe()
+    }
+    fn step(&mut self, actions: &[u8]) -> Result<(), EnvError> {
+        self.env.step(actions)?;
+        let restarts = self.env.stats().sim_restarts;
+        if restarts != self.restarts {
+            self.restarts = restarts;
+            self.restarted = true;
+            return Err(EnvError::PeerGone {
+                peer: "sim",
+                detail: "its batches started over (a restarted sim)".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
 /// The training learner of one process.
 pub struct Trainer {
     gcp: GoalConditionedPolicy,
@@ -156,6 +194,7 @@ pub struct Trainer {
     resumed_from: u64,
     last_checkpoint: u64,
     checkpoints_written: u64,
+    rollouts_dropped: u64,
 }
 
 /// What a training learner did, for `learner.report.json`.
@@ -171,6 +210,8 @@ pub struct TrainSummary {
     pub checkpoints_written: u64,
     /// The last checkpointed iteration.
     pub last_checkpoint: u64,
+    /// Rollouts this process dropped because the sim died or restarted.
+    pub rollouts_dropped: u64,
 }
 
 fn unix_ms() -> u64 {
@@ -210,6 +251,7 @@ impl Trainer {
             resumed_from: it,
             last_checkpoint: it,
             checkpoints_written: 0,
+            rollouts_dropped: 0,
         };
         t.log_line("start", None, false)?;
         Ok(t)
@@ -270,7 +312,14 @@ impl Trainer {
                 break "stop request";
             }
             let t0 = Instant::now();
-            match self.gcp.train_iteration(env, None) {
+            let mut guarded = RestartGuard {
+                restarts: env.stats().sim_restarts,
+                env,
+                restarted: false,
+            };
+            let result = self.gcp.train_iteration(&mut guarded, None);
+            let restarted = guarded.restarted;
+            match result {
                 Ok(stats) => {
                     lat.record("iteration", t0.elapsed().as_nanos() as u64);
                     // Trajectories are the latent model's input; nobody
@@ -290,8 +339,12 @@ impl Trainer {
                 Err(LearnerError::Env(EnvError::Interrupted)) => break "stop request",
                 Err(LearnerError::Env(EnvError::PeerGone { detail, .. })) => {
                     // The partial rollout is dropped: the next iteration's
-                    // rollout starts afresh from the rejoined sim's batch.
-                    if let Some(why) = after_sim_death(ctx, env, &detail)? {
+                    // rollout starts afresh from the new sim's batch.
+                    self.rollouts_dropped += 1;
+                    self.log_line("dropped", None, false)?;
+                    if restarted {
+                        eprintln!("learner: the sim restarted during a rollout; rollout dropped");
+                    } else if let Some(why) = after_sim_death(ctx, env, &detail)? {
                         break why;
                     }
                 }
@@ -329,6 +382,7 @@ impl Trainer {
                 env_steps: self.state.env_steps,
                 checkpoints_written: self.checkpoints_written,
                 last_checkpoint: self.last_checkpoint,
+                rollouts_dropped: self.rollouts_dropped,
             }),
         })
     }
