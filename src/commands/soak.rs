@@ -250,15 +250,10 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
                 && secs.is_multiple_of(10)
                 && !std::io::IsTerminal::is_terminal(&std::io::stderr())
             {
-                eprintln!(
-                    "soak: {secs} s, kills {}",
-                    recoveries.len() + usize::from(pending.is_some())
-                );
+                // (A kill is in `recoveries` from the moment it is made.)
+                eprintln!("soak: {secs} s, kills {}", recoveries.len());
             }
-            bar.set_message(format!(
-                "kills {}",
-                recoveries.len() + usize::from(pending.is_some())
-            ));
+            bar.set_message(format!("kills {}", recoveries.len()));
         }
         // A pending recovery: batches flow again once the sim's progress
         // moved past what it was right after the restart.
@@ -473,7 +468,10 @@ fn print_report(r: &SoakReport, dir: &Path) {
         r.shm_left_behind.len()
     );
     if let Some(t) = &r.training {
-        println!("  training (π_g, checkpoint every {} iterations)", t.checkpoint_every);
+        println!(
+            "  training (π_g, checkpoint every {} iterations)",
+            t.checkpoint_every
+        );
         for (what, n) in [
             ("iterations run (all learners)", t.iterations_run),
             ("iterations kept (final checkpoint)", t.iterations_kept),
@@ -502,12 +500,11 @@ fn print_report(r: &SoakReport, dir: &Path) {
                     pause_s,
                 }) => {
                     let lost = iterations_lost.map_or(String::new(), |n| {
-                        format!(", {n} iterations lost")
+                        format!(", {n} iteration{} lost", if n == 1 { "" } else { "s" })
                     });
-                    let pause =
-                        pause_s.map_or(", no iteration after it".into(), |p| {
-                            format!(", training paused {p:.1} s")
-                        });
+                    let pause = pause_s.map_or(", no iteration after it".into(), |p| {
+                        format!(", training paused {p:.1} s")
+                    });
                     format!("{lost}{pause}")
                 }
                 None => String::new(),

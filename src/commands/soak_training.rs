@@ -119,7 +119,10 @@ pub fn analyse(
     checkpoint_every: u64,
 ) -> TrainingReport {
     let procs = read_log(&dir.join(TRAIN_LOG));
-    let mut all_ms: Vec<u64> = procs.values().flat_map(|p| p.iteration_ms.clone()).collect();
+    let mut all_ms: Vec<u64> = procs
+        .values()
+        .flat_map(|p| p.iteration_ms.clone())
+        .collect();
     all_ms.sort_unstable();
     let mut gaps: Vec<u64> = procs
         .values()
@@ -198,7 +201,9 @@ pub fn analyse(
             .sum(),
         checkpoints_written: procs.values().map(|p| p.checkpoints).sum(),
         rollouts_dropped: procs.values().map(|p| p.dropped).sum(),
-        median_iteration_s: gaps.get(gaps.len() / 2).map_or(f64::NAN, |&g| g as f64 / 1000.0),
+        median_iteration_s: gaps
+            .get(gaps.len() / 2)
+            .map_or(f64::NAN, |&g| g as f64 / 1000.0),
         final_checkpoint_error,
     }
 }

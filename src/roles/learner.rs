@@ -219,7 +219,6 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
             &ctx,
             &layout,
             shape,
-            num_actions,
             &mut env,
             &mut stream_log,
             &mut lat,
@@ -270,12 +269,12 @@ fn serve_policy(
     ctx: &RunCtx,
     layout: &sim::Layout,
     shape: ObsShape,
-    num_actions: usize,
     env: &mut ShmEnv<ipc::Service>,
     stream_log: &mut StreamLog,
     lat: &mut Latencies,
 ) -> anyhow::Result<Served> {
     let per_slice = shape.envs();
+    let num_actions = env.num_actions();
     // One policy per slice: sample k holds slice k mod K, and each slice's
     // environments keep their own recurrent state.
     let mut policies: Vec<Box<dyn Policy>> = (0..a.slices as u64)

@@ -43,9 +43,9 @@ use learner::gcp::{GcpConfig, GoalConditionedPolicy};
 use serde::{Deserialize, Serialize};
 use sim::Layout;
 
+use super::RunCtx;
 use super::learner::{PolicyKind, Served, StreamLog, after_sim_death};
 use super::shm_env::ShmEnv;
-use super::RunCtx;
 use crate::latency::Latencies;
 
 /// The checkpoint directory inside the run directory.
@@ -102,12 +102,16 @@ impl TrainState {
             (old != new).then(|| format!("{what} is {old} in the checkpoint, {new} now"))
         };
         differs("maze", self.maze.clone(), now.maze.clone())
-            .or_else(|| differs("grid", format!("{:?}", self.grid), format!("{:?}", now.grid)))
+            .or_else(|| {
+                differs(
+                    "grid",
+                    format!("{:?}", self.grid),
+                    format!("{:?}", now.grid),
+                )
+            })
             .or_else(|| differs("--envs", self.envs.to_string(), now.envs.to_string()))
             .or_else(|| differs("--task", self.task.clone(), now.task.clone()))
-            .or_else(|| {
-                (self.gcp != now.gcp).then(|| "π_g's configuration differs".to_string())
-            })
+            .or_else(|| (self.gcp != now.gcp).then(|| "π_g's configuration differs".to_string()))
     }
 }
 
@@ -284,10 +288,7 @@ impl Trainer {
     fn checkpoint(&mut self) -> anyhow::Result<()> {
         let weights = learner::checkpoint::var_store_bytes(self.gcp.var_store())?;
         let state = serde_json::to_vec_pretty(&self.state)?;
-        learner::checkpoint::commit(
-            &self.dir,
-            &[("gcp.ot", &weights), ("state.json", &state)],
-        )?;
+        learner::checkpoint::commit(&self.dir, &[("gcp.ot", &weights), ("state.json", &state)])?;
         self.last_checkpoint = self.state.iterations;
         self.checkpoints_written += 1;
         Ok(())
