@@ -4,11 +4,13 @@
 //! across kills), lose at most one checkpoint interval, and the stream must
 //! lose and reorder nothing.
 
-use std::process::{Command, Stdio};
+use std::path::Path;
 use std::time::Duration;
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
+
+use crate::reliability::{run_bounded_with_pid, shm_files};
 
 /// The roles the soak kills for `seed`, in order: it draws them as
 /// `Role::ALL[rng.random_range(0..3)]` from `SmallRng::seed_from_u64(seed)`,
@@ -38,8 +40,9 @@ fn soak_with_a_training_learner_resumes_after_kills() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("soak");
     let every = 5u64;
-    let child = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
-        .args([
+    let (every_s, seed_s) = (every.to_string(), seed.to_string());
+    let (pid, out) = run_bounded_with_pid(
+        &[
             "soak",
             "--minutes",
             "0.4",
@@ -47,37 +50,20 @@ fn soak_with_a_training_learner_resumes_after_kills() {
             "6",
             "--learner-trains",
             "--checkpoint-every",
-            &every.to_string(),
+            &every_s,
             "--maze",
             "small",
             "--envs",
             "8",
             "--seed",
-            &seed.to_string(),
+            &seed_s,
             "--json",
             "--run-dir",
-        ])
-        .arg(&dir)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn worldgraph soak");
-    let run = format!("soak-{}", child.id());
-    let pid = child.id();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = tx.send(child.wait_with_output());
-    });
-    let out = match rx.recv_timeout(Duration::from_secs(120)) {
-        Ok(out) => out.unwrap(),
-        Err(_) => {
-            let _ = Command::new("kill")
-                .args(["-TERM", &pid.to_string()])
-                .status();
-            panic!("soak still running after 120 s");
-        }
-    };
+            dir.to_str().unwrap(),
+        ],
+        Duration::from_secs(120),
+    );
+    let run = format!("soak-{pid}");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "soak failed: {stderr}");
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -85,27 +71,31 @@ fn soak_with_a_training_learner_resumes_after_kills() {
     assert_eq!(report["lost"], 0, "{report}");
     assert_eq!(report["reordered"], 0, "{report}");
     assert_eq!(report["shm_left_behind"].as_array().unwrap().len(), 0);
-    let left: Vec<_> = std::fs::read_dir("/dev/shm")
-        .unwrap()
-        .flatten()
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.starts_with(&format!("wg_{run}_")))
-        .collect();
+    let left = shm_files(&run);
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
 
     let kills = report["recoveries"].as_array().unwrap();
     let learner_kills: Vec<_> = kills.iter().filter(|k| k["role"] == "learner").collect();
     assert!(!learner_kills.is_empty(), "no learner kill: {report}");
-    assert!(kills.iter().any(|k| k["role"] == "sim"), "no sim kill: {report}");
+    assert!(
+        kills.iter().any(|k| k["role"] == "sim"),
+        "no sim kill: {report}"
+    );
     for k in &learner_kills {
         let lost = k["training"]["iterations_lost"]
             .as_u64()
             .unwrap_or_else(|| panic!("learner kill without a count: {k}"));
-        assert!(lost <= every, "lost {lost} > checkpoint interval {every}: {k}");
+        assert!(
+            lost <= every,
+            "lost {lost} > checkpoint interval {every}: {k}"
+        );
     }
     for k in kills {
         assert!(k["recovered_after_s"].is_number(), "not recovered: {k}");
-        assert!(k["training"]["pause_s"].is_number(), "no iteration after: {k}");
+        assert!(
+            k["training"]["pause_s"].is_number(),
+            "no iteration after: {k}"
+        );
     }
 
     // Resumed, not restarted: each learner process starts at the iteration
@@ -144,4 +134,75 @@ fn soak_with_a_training_learner_resumes_after_kills() {
     )
     .unwrap();
     assert_eq!(state["iterations"].as_u64(), Some(kept));
+
+    // A learner of another batch size does not resume those weights: it is
+    // refused before it connects, naming the field.
+    let (_, out) = run_bounded_with_pid(
+        &[
+            "learner",
+            "serve",
+            "--policy",
+            "train-gcp",
+            "--slices",
+            "1",
+            "--envs",
+            "16",
+            "--maze",
+            "small",
+            "--run",
+            &format!("{run}-again"),
+            "--run-dir",
+            dir.to_str().unwrap(),
+        ],
+        Duration::from_secs(30),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--envs is 8 in the checkpoint, 16 now"),
+        "{stderr}"
+    );
+    assert!(shm_files(&format!("{run}-again")).is_empty());
+}
+
+#[test]
+fn a_training_learner_needs_one_slice() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_str().unwrap();
+    let run = format!("s{}-slices", std::process::id());
+    let limit = Duration::from_secs(30);
+    let want = "--policy train-gcp trains on the whole batch lock-step: it needs --slices 1, not 2";
+    let (_, role) = run_bounded_with_pid(
+        &[
+            "learner",
+            "serve",
+            "--policy",
+            "train-gcp",
+            "--slices",
+            "2",
+            "--run",
+            &run,
+            "--run-dir",
+            dir,
+        ],
+        limit,
+    );
+    let (_, soak) = run_bounded_with_pid(
+        &[
+            "soak",
+            "--learner-trains",
+            "--slices",
+            "2",
+            "--run-dir",
+            dir,
+        ],
+        limit,
+    );
+    for (out, code) in [(role, 2), (soak, 1)] {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{stderr}");
+        assert!(stderr.contains(want), "{stderr}");
+    }
+    assert!(shm_files(&run).is_empty());
+    assert!(!Path::new(dir).join("learner-train").exists());
 }
