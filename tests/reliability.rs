@@ -19,7 +19,8 @@ fn run_name(test: &str) -> String {
     format!("r{}-{}", std::process::id(), test)
 }
 
-fn shm_files(run: &str) -> Vec<String> {
+/// The run's files in `/dev/shm`.
+pub(crate) fn shm_files(run: &str) -> Vec<String> {
     let prefix = format!("wg_{run}_");
     std::fs::read_dir("/dev/shm")
         .map(|d| {
@@ -58,6 +59,11 @@ fn spawn(dir: &Path, log: &str, args: &[&str]) -> Proc {
 
 /// Runs worldgraph to its end, killing it (and failing) after `limit`.
 fn run_bounded(args: &[&str], limit: Duration) -> Output {
+    run_bounded_with_pid(args, limit).1
+}
+
+/// [`run_bounded`], with the process's pid (a `soak` names its run after it).
+pub(crate) fn run_bounded_with_pid(args: &[&str], limit: Duration) -> (u32, Output) {
     let child = Command::new(exe())
         .args(args)
         .stdin(Stdio::null())
@@ -71,7 +77,7 @@ fn run_bounded(args: &[&str], limit: Duration) -> Output {
         let _ = tx.send(child.wait_with_output());
     });
     match rx.recv_timeout(limit) {
-        Ok(out) => out.unwrap(),
+        Ok(out) => (pid, out.unwrap()),
         Err(_) => {
             let _ = Command::new("kill")
                 .args(["-KILL", &pid.to_string()])

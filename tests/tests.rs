@@ -16,3 +16,5 @@ mod fuzz;
 mod docs;
 // Failures that must be clean and runs that must not collide (issue 14).
 mod reliability;
+// The soak with a learner that trains π_g: kills cost at most a checkpoint.
+mod soak;

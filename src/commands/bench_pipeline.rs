@@ -323,6 +323,7 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
         threads: a.threads,
         policy: PolicyKind::Random,
         route_every: 0,
+        checkpoint_every: 10,
         logs_to_files: true,
         pin: false,
     };

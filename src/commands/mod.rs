@@ -11,5 +11,6 @@ pub mod experiment;
 pub mod run;
 pub mod sim;
 pub mod soak;
+pub mod soak_training;
 pub mod table;
 pub mod train;

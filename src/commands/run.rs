@@ -49,6 +49,10 @@ pub struct RunCmdArgs {
     /// The learner asks the planner for a route every this many batches (0 = never).
     #[arg(long, default_value_t = 0)]
     pub route_every: u64,
+    /// With `--policy train-gcp`: the learner checkpoints π_g every this
+    /// many training iterations (and at a clean stop).
+    #[arg(long, default_value_t = 10)]
+    pub checkpoint_every: u64,
     /// Write each process's messages to `<run dir>/<role>.log` instead of the terminal.
     #[arg(long)]
     pub logs_to_files: bool,
@@ -99,16 +103,18 @@ impl RunCmdArgs {
         match role {
             Role::Sim => v.extend(["--threads".into(), self.threads.to_string()]),
             Role::Learner => {
-                let p = match self.policy {
-                    PolicyKind::Random => "random",
-                    PolicyKind::ActorCritic => "actor-critic",
-                };
                 v.extend([
                     "--policy".into(),
-                    p.into(),
+                    self.policy.name().into(),
                     "--route-every".into(),
                     self.route_every.to_string(),
                 ]);
+                if self.policy == PolicyKind::TrainGcp {
+                    v.extend([
+                        "--checkpoint-every".into(),
+                        self.checkpoint_every.to_string(),
+                    ]);
+                }
             }
             Role::Planner => {
                 let g = &self.graph;
@@ -152,6 +158,11 @@ impl RunCmdArgs {
         let run = RunName::new(&self.run.run)?;
         let (layout, _) = self.world.build()?;
         shm_schemas::ObsShape::sliced(self.envs, self.slices, layout.width, layout.height)?;
+        crate::roles::learner_train::check_slices(self.policy, self.slices)?;
+        anyhow::ensure!(
+            self.checkpoint_every >= 1,
+            "--checkpoint-every must be at least 1"
+        );
         self.graph.config(&self.world).validate()?;
         if let Some(path) = &self.graph.node_file {
             planner::pivotal::read_node_file(&layout, path)?;

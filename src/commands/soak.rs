@@ -31,6 +31,7 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
 use super::run::{RunCmdArgs, stop_flag, teardown};
+use super::soak_training::{KillCost, TrainingReport};
 use crate::pipeline::Role;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
@@ -57,12 +58,22 @@ pub struct SoakArgs {
     /// Environments in the batch.
     #[arg(long, default_value_t = 256)]
     pub envs: usize,
-    /// Slices the sim publishes its batch in (see `run --slices`).
-    #[arg(long, default_value_t = 2)]
-    pub slices: usize,
-    /// The learner asks the planner for a route every this many batches.
+    /// Slices the sim publishes its batch in (see `run --slices`)
+    /// [default: 2; 1 with --learner-trains, which needs it].
+    #[arg(long)]
+    pub slices: Option<usize>,
+    /// The learner asks the planner for a route every this many batches
+    /// (not with --learner-trains).
     #[arg(long, default_value_t = 1000)]
     pub route_every: u64,
+    /// The learner trains π_g (`learner serve --policy train-gcp`) instead
+    /// of answering with random actions: a killed learner resumes from its
+    /// last checkpoint, and the report says what each kill cost the training.
+    #[arg(long)]
+    pub learner_trains: bool,
+    /// With --learner-trains: checkpoint π_g every this many iterations.
+    #[arg(long, default_value_t = 10)]
+    pub checkpoint_every: u64,
     /// Run directory [default: runs/soak-<pid>].
     #[arg(long)]
     pub run_dir: Option<PathBuf>,
@@ -78,8 +89,13 @@ pub struct Recovery {
     pub at_s: f64,
     /// The process killed.
     pub role: Role,
+    /// Its pid.
+    pub pid: Option<u32>,
     /// Seconds from the kill until batches flowed again (None: not within the limit).
     pub recovered_after_s: Option<f64>,
+    /// With --learner-trains: what the kill cost the training.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub training: Option<KillCost>,
 }
 
 /// The soak report.
@@ -107,6 +123,9 @@ pub struct SoakReport {
     pub roundtrip_p99_us_worst_interval_per_minute: Vec<f64>,
     /// The run's shared-memory files left after teardown.
     pub shm_left_behind: Vec<String>,
+    /// With --learner-trains: iterations, checkpoints, what kills cost.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub training: Option<TrainingReport>,
     /// Everything held.
     pub ok: bool,
 }
@@ -140,6 +159,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(k) = a.kill_every {
         anyhow::ensure!(k >= 2.0, "--kill-every must be at least 2 seconds");
     }
+    let slices = a.slices.unwrap_or(if a.learner_trains { 1 } else { 2 });
     let run = format!("soak-{}", std::process::id());
     let dir = a
         .run_dir
@@ -163,10 +183,15 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             cpu: None,
         },
         envs: a.envs,
-        slices: a.slices,
+        slices,
         threads: 1,
-        policy: PolicyKind::Random,
-        route_every: a.route_every,
+        policy: if a.learner_trains {
+            PolicyKind::TrainGcp
+        } else {
+            PolicyKind::Random
+        },
+        route_every: if a.learner_trains { 0 } else { a.route_every },
+        checkpoint_every: a.checkpoint_every,
         logs_to_files: true,
         pin: false,
     };
@@ -225,15 +250,10 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
                 && secs.is_multiple_of(10)
                 && !std::io::IsTerminal::is_terminal(&std::io::stderr())
             {
-                eprintln!(
-                    "soak: {secs} s, kills {}",
-                    recoveries.len() + usize::from(pending.is_some())
-                );
+                // (A kill is in `recoveries` from the moment it is made.)
+                eprintln!("soak: {secs} s, kills {}", recoveries.len());
             }
-            bar.set_message(format!(
-                "kills {}",
-                recoveries.len() + usize::from(pending.is_some())
-            ));
+            bar.set_message(format!("kills {}", recoveries.len()));
         }
         // A pending recovery: batches flow again once the sim's progress
         // moved past what it was right after the restart.
@@ -267,6 +287,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         {
             let role = Role::ALL[rng.random_range(0..Role::ALL.len())];
             let before = last_progress(&stats);
+            let pid = p.pid(role);
             p.kill_hard(role)?;
             let killed_at = Instant::now();
             bar.println(format!(
@@ -278,7 +299,9 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             recoveries.push(Recovery {
                 at_s: (killed_at - start).as_secs_f64(),
                 role,
+                pid,
                 recovered_after_s: None,
+                training: None,
             });
             pending = Some((recoveries.len() - 1, killed_at, before));
             next_kill = a.kill_every.map(|s| killed_at + Duration::from_secs_f64(s));
@@ -351,6 +374,19 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             *g = (*g).max(m.last as i64 - b as i64);
         }
     }
+    let training = a.learner_trains.then(|| {
+        super::soak_training::analyse(
+            &dir,
+            &mut recoveries,
+            start_unix_ms,
+            &a.world,
+            a.envs,
+            a.checkpoint_every,
+        )
+    });
+    let trained = training
+        .as_ref()
+        .is_none_or(|t| t.final_checkpoint_error.is_none() && t.iterations_kept > 0);
     let failed_recoveries = recoveries
         .iter()
         .filter(|r| r.recovered_after_s.is_none())
@@ -361,6 +397,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         && left.is_empty()
         && !leaked
         && failed_recoveries == 0
+        && trained
         && batches > 0;
     let report = SoakReport {
         minutes: (Instant::now() - start).as_secs_f64() / 60.0,
@@ -374,6 +411,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         roundtrip_p99_us_per_minute: per_minute,
         roundtrip_p99_us_worst_interval_per_minute: worst_per_minute,
         shm_left_behind: left,
+        training,
         ok,
     };
     sim::render::write_atomic(
@@ -429,17 +467,60 @@ fn print_report(r: &SoakReport, dir: &Path) {
         "shared-memory files left behind",
         r.shm_left_behind.len()
     );
+    if let Some(t) = &r.training {
+        println!(
+            "  training (π_g, checkpoint every {} iterations)",
+            t.checkpoint_every
+        );
+        for (what, n) in [
+            ("iterations run (all learners)", t.iterations_run),
+            ("iterations kept (final checkpoint)", t.iterations_kept),
+            ("iterations lost to learner kills", t.iterations_lost),
+            ("checkpoints written", t.checkpoints_written),
+            ("rollouts dropped (sim died)", t.rollouts_dropped),
+            ("learner processes", t.learner_processes as u64),
+        ] {
+            println!("    {what:<32} {n:>12}");
+        }
+        println!(
+            "    {:<32} {:>12.2}",
+            "median time per iteration (s)", t.median_iteration_s
+        );
+        match &t.final_checkpoint_error {
+            None => println!("    {:<32} {:>12}", "final π_g loads", "yes"),
+            Some(e) => println!("    final π_g does NOT load: {e}"),
+        }
+    }
     if !r.recoveries.is_empty() {
         println!("  kills:");
         for k in &r.recoveries {
+            let cost = match &k.training {
+                Some(KillCost {
+                    iterations_lost,
+                    pause_s,
+                }) => {
+                    let lost = iterations_lost.map_or(String::new(), |n| {
+                        format!(", {n} iteration{} lost", if n == 1 { "" } else { "s" })
+                    });
+                    let pause = pause_s.map_or(", no iteration after it".into(), |p| {
+                        format!(", training paused {p:.1} s")
+                    });
+                    format!("{lost}{pause}")
+                }
+                None => String::new(),
+            };
             match k.recovered_after_s {
                 Some(s) => println!(
-                    "    {:>7.1} s  {:<8} recovered after {:.2} s",
+                    "    {:>7.1} s  {:<8} recovered after {:.2} s{cost}",
                     k.at_s,
                     k.role.name(),
                     s
                 ),
-                None => println!("    {:>7.1} s  {:<8} NOT recovered", k.at_s, k.role.name()),
+                None => println!(
+                    "    {:>7.1} s  {:<8} NOT recovered{cost}",
+                    k.at_s,
+                    k.role.name()
+                ),
             }
         }
     }

@@ -19,6 +19,7 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 use shm_schemas::ObsShape;
 
+use super::learner_train::{TrainSummary, Trainer, check_slices};
 use super::shm_env::{ShmEnv, ShmEnvOptions, StreamStats};
 use super::{
     EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE,
@@ -34,6 +35,21 @@ pub enum PolicyKind {
     Random,
     /// The A2C-LSTM actor-critic's forward pass (CNN encoder + LSTM core).
     ActorCritic,
+    /// Trains π_g (the goal-conditioned policy) by A2C on the stream, with
+    /// checkpoints in `<run dir>/learner-train/` that a restarted learner
+    /// resumes from; needs `--slices 1`.
+    TrainGcp,
+}
+
+impl PolicyKind {
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            PolicyKind::Random => "random",
+            PolicyKind::ActorCritic => "actor-critic",
+            PolicyKind::TrainGcp => "train-gcp",
+        }
+    }
 }
 
 /// `learner serve` options.
@@ -52,9 +68,14 @@ pub struct LearnerServeArgs {
     /// The policy.
     #[arg(long, value_enum, default_value = "random")]
     pub policy: PolicyKind,
-    /// Ask the planner for a route every this many batches (0 = never).
+    /// Ask the planner for a route every this many batches (0 = never;
+    /// `train-gcp` asks for none).
     #[arg(long, default_value_t = 0)]
     pub route_every: u64,
+    /// With `--policy train-gcp`: checkpoint π_g every this many training
+    /// iterations (and at a clean stop).
+    #[arg(long, default_value_t = 10)]
+    pub checkpoint_every: u64,
 }
 
 /// What the learner reports at exit (`learner.report.json`).
@@ -76,6 +97,56 @@ pub struct LearnerReport {
     pub routes_requested: u64,
     /// Why the loop ended.
     pub stopped_by: String,
+    /// With `train-gcp`: the training this process did and kept.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub training: Option<TrainSummary>,
+}
+
+/// What a policy loop did (the report's figures).
+pub struct Served {
+    /// Policy name.
+    pub policy: String,
+    /// Batches answered.
+    pub batches: u64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Sum of their returns.
+    pub return_sum: f64,
+    /// Routes received with status Ok.
+    pub routes_ok: u64,
+    /// Route requests sent.
+    pub routes_requested: u64,
+    /// Why the loop ended.
+    pub stopped_by: String,
+    /// With `train-gcp`: the training summary.
+    pub training: Option<TrainSummary>,
+}
+
+/// `learner.stream.jsonl`: appended by every learner process of the run,
+/// one line every 250 ms or so with its pid: what a soak test sums up even
+/// for a killed learner.
+pub struct StreamLog {
+    file: std::fs::File,
+    pid: u32,
+}
+
+impl StreamLog {
+    fn open(dir: &std::path::Path) -> std::io::Result<StreamLog> {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(dir.join("learner.stream.jsonl"))?;
+        Ok(StreamLog {
+            file,
+            pid: std::process::id(),
+        })
+    }
+
+    /// Appends one line of `s`.
+    pub fn write(&mut self, s: StreamStats) -> std::io::Result<()> {
+        let line = serde_json::json!({ "pid": self.pid, "stream": s });
+        writeln!(self.file, "{line}")
+    }
 }
 
 /// Runs the learner role until stopped; returns the process exit code.
@@ -84,13 +155,27 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     let checked = (|| -> anyhow::Result<_> {
         let (layout, cfg) = a.world.build()?;
         let shape = ObsShape::sliced(a.envs, a.slices, layout.width, layout.height)?;
-        Ok((RunCtx::new(&a.run, LEARNER_NODE)?, layout, cfg, shape))
+        check_slices(a.policy, a.slices)?;
+        let ctx = RunCtx::new(&a.run, LEARNER_NODE)?;
+        // A checkpoint of another run's settings is refused before connecting.
+        let trainer = match a.policy {
+            PolicyKind::TrainGcp => Some(Trainer::open(
+                &ctx.dir,
+                &layout,
+                a.envs,
+                cfg.task.name(),
+                cfg.task.num_actions(),
+                a.world.seed,
+                a.checkpoint_every,
+            )?),
+            _ => None,
+        };
+        Ok((ctx, layout, cfg, shape, trainer))
     })();
-    let (ctx, layout, cfg, shape) = match checked {
+    let (ctx, layout, cfg, shape, trainer) = match checked {
         Ok(v) => v,
         Err(e) => return Ok(config_exit("learner", &e)),
     };
-    let per_slice = shape.envs();
     let num_actions = cfg.task.num_actions();
     let opts = ShmEnvOptions {
         node_name: LEARNER_NODE.into(),
@@ -125,12 +210,78 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         Err(e) => return Err(e.into()),
     };
+    let mut stream_log = StreamLog::open(&ctx.dir)?;
+    let mut lat = Latencies::new("learner");
+    let served = match trainer {
+        Some(t) => t.run(&ctx, &mut env, &mut stream_log, &mut lat)?,
+        None => serve_policy(
+            &a,
+            &ctx,
+            &layout,
+            shape,
+            &mut env,
+            &mut stream_log,
+            &mut lat,
+        )?,
+    };
+    stream_log.write(env.stats())?;
+    let stream = env.stats();
+    drop(env);
+    ctx.tidy();
+    let stopped_by = served.stopped_by.clone();
+    let report = LearnerReport {
+        policy: served.policy,
+        stream,
+        batches: served.batches,
+        episodes: served.episodes,
+        mean_episode_return: if served.episodes > 0 {
+            served.return_sum / served.episodes as f64
+        } else {
+            f64::NAN
+        },
+        routes_ok: served.routes_ok,
+        routes_requested: served.routes_requested,
+        stopped_by: stopped_by.clone(),
+        training: served.training,
+    };
+    ctx.write_json("learner.report.json", &report)?;
+    lat.write_reports(&ctx.dir)?;
+    eprint!("{}", lat.table());
+    eprintln!(
+        "learner: {} batches, lost {}, reordered {}, sim restarts {}, stopped by {}",
+        report.batches,
+        report.stream.lost,
+        report.stream.reordered,
+        report.stream.sim_restarts,
+        stopped_by
+    );
+    Ok(if stopped_by == "sim died" {
+        std::process::ExitCode::from(EXIT_PEER_DIED)
+    } else {
+        std::process::ExitCode::SUCCESS
+    })
+}
+
+/// The policy loop of `random` and `actor-critic`: one policy per slice,
+/// route requests now and then.
+fn serve_policy(
+    a: &LearnerServeArgs,
+    ctx: &RunCtx,
+    layout: &sim::Layout,
+    shape: ObsShape,
+    env: &mut ShmEnv<ipc::Service>,
+    stream_log: &mut StreamLog,
+    lat: &mut Latencies,
+) -> anyhow::Result<Served> {
+    let per_slice = shape.envs();
+    let num_actions = env.num_actions();
     // One policy per slice: sample k holds slice k mod K, and each slice's
     // environments keep their own recurrent state.
     let mut policies: Vec<Box<dyn Policy>> = (0..a.slices as u64)
         .map(|k| -> Box<dyn Policy> {
             match a.policy {
-                PolicyKind::Random => Box::new(RandomPolicy::new(
+                // (`train-gcp` runs its own loop, [`Trainer::run`].)
+                PolicyKind::Random | PolicyKind::TrainGcp => Box::new(RandomPolicy::new(
                     num_actions,
                     sim::env_seed(a.world.seed ^ 0x5eed, k),
                 )),
@@ -159,19 +310,9 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
     };
     let mut num_pivots = 0usize;
     let mut rng = SmallRng::seed_from_u64(a.world.seed);
-
-    let mut lat = Latencies::new("learner");
     for h in ["policy", "obs_one_way", "route_client"] {
         lat.register(h);
     }
-    // Appended by every learner process of the run, one line per second
-    // with its pid: what a soak test sums up even for a killed learner.
-    let mut stream_log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(ctx.dir.join("learner.stream.jsonl"))?;
-    let pid = std::process::id();
-    let stream_line = |s: StreamStats| serde_json::json!({ "pid": pid, "stream": s }).to_string();
     let mut planner = PeerWatch::new(PLANNER_NODE);
     let mut actions = vec![0u8; per_slice];
     let (mut batches, mut episodes, mut return_sum) = (0u64, 0u64, 0f64);
@@ -199,19 +340,9 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
                 break;
             }
             Err(EnvError::PeerGone { detail, .. }) => {
-                eprintln!("learner: the sim is gone ({detail})");
-                if ctx.on_peer_death == OnPeerDeath::Exit {
-                    stopped_by = "sim died".to_string();
+                if let Some(why) = after_sim_death(ctx, env, &detail)? {
+                    stopped_by = why.to_string();
                     break;
-                }
-                eprintln!("learner: waiting for a sim to rejoin");
-                match env.wait_for_peer(Duration::from_secs(3600)) {
-                    Ok(()) => eprintln!("learner: a sim rejoined at batch {}", env.observe().seq),
-                    Err(EnvError::Interrupted) => {
-                        stopped_by = "stop request".to_string();
-                        break;
-                    }
-                    Err(e) => return Err(e.into()),
                 }
             }
             Err(e) => return Err(e.into()),
@@ -224,7 +355,7 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
             if let Some(s) = graph.receive()? {
                 num_pivots = s.snapshot().nodes.len();
             }
-            planner.poll(&ctx);
+            planner.poll(ctx);
             if num_pivots > 0 && !planner.gone {
                 let to = rng.random_range(0..num_pivots) as u16;
                 let t0 = Instant::now();
@@ -241,42 +372,41 @@ pub fn serve(a: LearnerServeArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         if batches % 64 == 0 && Instant::now() >= next_log {
             next_log = Instant::now() + Duration::from_millis(250);
-            writeln!(stream_log, "{}", stream_line(env.stats()))?;
-            ctx.report_on_request(&lat);
+            stream_log.write(env.stats())?;
+            ctx.report_on_request(lat);
         }
     }
-    writeln!(stream_log, "{}", stream_line(env.stats()))?;
-    let stream = env.stats();
-    drop((route_client, graph, env));
-    ctx.tidy();
-    let report = LearnerReport {
+    drop((route_client, graph));
+    Ok(Served {
         policy: policies[0].name().to_string(),
-        stream,
         batches,
         episodes,
-        mean_episode_return: if episodes > 0 {
-            return_sum / episodes as f64
-        } else {
-            f64::NAN
-        },
+        return_sum,
         routes_ok,
         routes_requested,
-        stopped_by: stopped_by.clone(),
-    };
-    ctx.write_json("learner.report.json", &report)?;
-    lat.write_reports(&ctx.dir)?;
-    eprint!("{}", lat.table());
-    eprintln!(
-        "learner: {} batches, lost {}, reordered {}, sim restarts {}, stopped by {}",
-        batches,
-        report.stream.lost,
-        report.stream.reordered,
-        report.stream.sim_restarts,
-        stopped_by
-    );
-    Ok(if stopped_by == "sim died" {
-        std::process::ExitCode::from(EXIT_PEER_DIED)
-    } else {
-        std::process::ExitCode::SUCCESS
+        stopped_by,
+        training: None,
     })
+}
+
+/// After the sim died (`detail`): waits for a sim to rejoin when the run
+/// says so (`--on-peer-death wait`). Returns why to stop, or `None` to go on.
+pub fn after_sim_death(
+    ctx: &RunCtx,
+    env: &mut ShmEnv<ipc::Service>,
+    detail: &str,
+) -> anyhow::Result<Option<&'static str>> {
+    eprintln!("learner: the sim is gone ({detail})");
+    if ctx.on_peer_death == OnPeerDeath::Exit {
+        return Ok(Some("sim died"));
+    }
+    eprintln!("learner: waiting for a sim to rejoin");
+    match env.wait_for_peer(Duration::from_secs(3600)) {
+        Ok(()) => {
+            eprintln!("learner: a sim rejoined at batch {}", env.observe().seq);
+            Ok(None)
+        }
+        Err(EnvError::Interrupted) => Ok(Some("stop request")),
+        Err(e) => Err(e.into()),
+    }
 }

@@ -28,6 +28,7 @@ use serde::Serialize;
 use shm_schemas::service::{RunName, list_nodes, run_config};
 
 pub mod learner;
+pub mod learner_train;
 pub mod planner;
 pub mod shm_env;
 pub mod sim;

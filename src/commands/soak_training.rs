@@ -1,0 +1,209 @@
+//! `soak --learner-trains`: what the kills cost a learner that trains π_g
+//! (`learner serve --policy train-gcp`), from its per-iteration log
+//! (`learner-train.jsonl`, one line per iteration with the pid, the time,
+//! iterations done and the last checkpointed iteration, plus a `start` line
+//! per process with the iteration it resumed from).
+//!
+//! - **Iterations lost** to a learner kill: the killed process's last
+//!   iteration minus the iteration its successor resumed from (the
+//!   iterations since its last checkpoint; the rollout it was in when
+//!   killed is lost too, and not counted).
+//! - **Training pause** of any kill: the longest time without an iteration
+//!   finishing (by any learner process) in the [`PAUSE_WINDOW_S`] after the
+//!   kill, or until the next kill; to be read against the median time
+//!   between iterations. (An iteration can still finish just after a sim
+//!   is killed, from the batches it already had: the stall follows it.)
+//! - **Final π_g**: the checkpoint left in `<run dir>/learner-train/` is
+//!   loaded back into a fresh π_g of the soak's settings.
+
+use std::collections::BTreeMap;
+use std::io::BufRead;
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::soak::Recovery;
+use crate::pipeline::Role;
+use crate::roles::learner_train::{CHECKPOINT_DIR, TRAIN_LOG, open};
+use crate::world::WorldArgs;
+
+/// How long after a kill its training pause is looked for.
+pub const PAUSE_WINDOW_S: f64 = 10.0;
+
+/// What one kill cost the training.
+#[derive(Debug, Serialize)]
+pub struct KillCost {
+    /// Learner kills: iterations done since its last checkpoint (None when
+    /// no successor started within the soak).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations_lost: Option<u64>,
+    /// The longest time (s) without an iteration finishing in the
+    /// [`PAUSE_WINDOW_S`] after the kill (None: no iteration after it).
+    pub pause_s: Option<f64>,
+}
+
+/// The soak's training section.
+#[derive(Debug, Serialize)]
+pub struct TrainingReport {
+    /// Checkpoint interval (iterations).
+    pub checkpoint_every: u64,
+    /// Learner processes that trained.
+    pub learner_processes: usize,
+    /// Iterations finished by all learner processes, lost ones included.
+    pub iterations_run: u64,
+    /// Iterations in the final checkpoint (the work kept).
+    pub iterations_kept: u64,
+    /// Iterations lost to learner kills, in all.
+    pub iterations_lost: u64,
+    /// Checkpoints written by all learner processes.
+    pub checkpoints_written: u64,
+    /// Rollouts dropped because the sim died or restarted during them.
+    pub rollouts_dropped: u64,
+    /// Median seconds between two iterations of one process.
+    pub median_iteration_s: f64,
+    /// Why the final checkpoint could not be loaded (None: it loads).
+    pub final_checkpoint_error: Option<String>,
+}
+
+#[derive(Debug, Default)]
+struct ProcLog {
+    start_ms: u64,
+    resumed_from: u64,
+    last_iteration: u64,
+    checkpoints: u64,
+    dropped: u64,
+    iteration_ms: Vec<u64>,
+}
+
+fn read_log(path: &Path) -> BTreeMap<u64, ProcLog> {
+    let mut procs: BTreeMap<u64, ProcLog> = BTreeMap::new();
+    let Ok(f) = std::fs::File::open(path) else {
+        return procs;
+    };
+    for l in std::io::BufReader::new(f).lines().map_while(Result::ok) {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(&l) else {
+            continue; // a line torn by a kill
+        };
+        let (Some(pid), Some(ms), Some(it)) = (
+            v["pid"].as_u64(),
+            v["unix_ms"].as_u64(),
+            v["iteration"].as_u64(),
+        ) else {
+            continue;
+        };
+        let p = procs.entry(pid).or_default();
+        match v["event"].as_str() {
+            Some("start") => {
+                (p.start_ms, p.resumed_from, p.last_iteration) = (ms, it, it);
+            }
+            Some("iteration") => {
+                p.last_iteration = it;
+                p.iteration_ms.push(ms);
+            }
+            Some("dropped") => p.dropped += 1,
+            _ => {}
+        }
+        p.checkpoints += u64::from(v["checkpointed"].as_bool() == Some(true));
+    }
+    procs
+}
+
+/// The training section of a soak in `dir`, and each kill's cost filled
+/// into `recoveries` (`start_unix_ms`: the soak's start).
+pub fn analyse(
+    dir: &Path,
+    recoveries: &mut [Recovery],
+    start_unix_ms: u64,
+    world: &WorldArgs,
+    envs: usize,
+    checkpoint_every: u64,
+) -> TrainingReport {
+    let procs = read_log(&dir.join(TRAIN_LOG));
+    let mut all_ms: Vec<u64> = procs
+        .values()
+        .flat_map(|p| p.iteration_ms.clone())
+        .collect();
+    all_ms.sort_unstable();
+    let mut gaps: Vec<u64> = procs
+        .values()
+        .flat_map(|p| p.iteration_ms.windows(2).map(|w| w[1] - w[0]))
+        .collect();
+    gaps.sort_unstable();
+    let kills_ms: Vec<u64> = recoveries
+        .iter()
+        .map(|r| start_unix_ms + (r.at_s * 1000.0) as u64)
+        .collect();
+    for (i, r) in recoveries.iter_mut().enumerate() {
+        let kill_ms = kills_ms[i];
+        let window_end = kills_ms
+            .get(i + 1)
+            .copied()
+            .unwrap_or(u64::MAX)
+            .min(kill_ms + (PAUSE_WINDOW_S * 1000.0) as u64);
+        // Gaps between consecutive iterations that end after the kill and
+        // begin within the window; the first one may begin before the kill.
+        let first_after = all_ms.partition_point(|&t| t <= kill_ms);
+        let pause_s = (first_after < all_ms.len()).then(|| {
+            let from = first_after.saturating_sub(1);
+            let gaps = all_ms[from..]
+                .windows(2)
+                .take_while(|w| w[0] < window_end)
+                .map(|w| w[1] - w[0]);
+            let first = all_ms[first_after].saturating_sub(kill_ms);
+            gaps.fold(first, u64::max) as f64 / 1000.0
+        });
+        let iterations_lost = match (r.role, r.pid) {
+            (Role::Learner, Some(pid)) => {
+                let killed = procs.get(&u64::from(pid));
+                let next = procs
+                    .values()
+                    .filter(|p| p.start_ms > kill_ms)
+                    .min_by_key(|p| p.start_ms);
+                match (killed, next) {
+                    (Some(k), Some(n)) => Some(k.last_iteration.saturating_sub(n.resumed_from)),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        r.training = Some(KillCost {
+            iterations_lost,
+            pause_s,
+        });
+    }
+    let ckpt = dir.join(CHECKPOINT_DIR);
+    let loaded = world.build().and_then(|(layout, cfg)| {
+        open(
+            &ckpt,
+            &layout,
+            envs,
+            cfg.task.name(),
+            cfg.task.num_actions(),
+            world.seed,
+        )
+    });
+    let (iterations_kept, final_checkpoint_error) = match loaded {
+        Ok((_, state)) if ckpt.join("gcp.ot").is_file() => (state.iterations, None),
+        Ok(_) => (0, Some(format!("no checkpoint in {}", ckpt.display()))),
+        Err(e) => (0, Some(format!("{e:#}"))),
+    };
+    TrainingReport {
+        checkpoint_every,
+        learner_processes: procs.len(),
+        iterations_run: procs
+            .values()
+            .map(|p| p.last_iteration - p.resumed_from)
+            .sum(),
+        iterations_kept,
+        iterations_lost: recoveries
+            .iter()
+            .filter_map(|r| r.training.as_ref()?.iterations_lost)
+            .sum(),
+        checkpoints_written: procs.values().map(|p| p.checkpoints).sum(),
+        rollouts_dropped: procs.values().map(|p| p.dropped).sum(),
+        median_iteration_s: gaps
+            .get(gaps.len() / 2)
+            .map_or(f64::NAN, |&g| g as f64 / 1000.0),
+        final_checkpoint_error,
+    }
+}
