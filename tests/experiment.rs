@@ -103,6 +103,18 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         before
     );
 
+    // The same results under another budget are refused, not counted.
+    std::fs::write(
+        d.join("longer.toml"),
+        grid("tiny", 5760, "\"a2c\", \"wn-pivotal-trav-init\""),
+    )
+    .unwrap();
+    let err = refused(&worldgraph(d, &["experiment", "longer.toml"]));
+    assert!(
+        err.contains("was run with env_steps 3840") && err.contains("another --results"),
+        "{err}"
+    );
+
     // Each summary reproduces from its JSON alone, discovery included, in a
     // fresh working directory.
     let (out, _) = ok(&worldgraph(

@@ -703,7 +703,43 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
                 config,
                 seed,
                 ..
-            } => run_path(&plan.results, maze.name(), task.name(), config, *seed).exists(),
+            } => {
+                let path = run_path(&plan.results, maze.name(), task.name(), config, *seed);
+                if path.exists() {
+                    // A cell never mixes budgets: a summary of another
+                    // budget or protocol is refused, not counted.
+                    let r = read_run(&path)?;
+                    let want = plan.grid.train_config(*maze);
+                    let got = &r.train_config;
+                    anyhow::ensure!(
+                        (
+                            got.env_steps,
+                            got.eval_every,
+                            got.validation_seeds,
+                            got.test_seeds
+                        ) == (
+                            want.env_steps,
+                            want.eval_every,
+                            want.validation_seeds,
+                            want.test_seeds
+                        ),
+                        "{} was run with env_steps {}, eval_every {}, {} validation and {} test seeds; \
+                         this grid asks for {}, {}, {} and {}: give the grid another --results directory",
+                        path.display(),
+                        got.env_steps,
+                        got.eval_every,
+                        got.validation_seeds,
+                        got.test_seeds,
+                        want.env_steps,
+                        want.eval_every,
+                        want.validation_seeds,
+                        want.test_seeds
+                    );
+                    true
+                } else {
+                    false
+                }
+            }
         };
     }
     // A discovery is needed only by training runs still to do.
