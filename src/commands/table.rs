@@ -306,12 +306,12 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let _ = writeln!(md, "## Budgets\n");
     let _ = writeln!(
         md,
-        "| maze | env steps per run | validation every | runs | mean wall s per run | mean training env-steps/s | share of the paper's budget |\n|---|---:|---:|---:|---:|---:|---:|"
+        "| maze | env steps per run (trained) | validation every | runs | mean wall s per run | mean training env-steps/s | share of the paper's budget |\n|---|---:|---:|---:|---:|---:|---:|"
     );
     for m in &mazes {
         let rs: Vec<&RunResult> = runs.iter().filter(|r| r.maze == *m).collect();
         let steps: std::collections::BTreeSet<u64> =
-            rs.iter().map(|r| r.train_config.env_steps).collect();
+            rs.iter().map(|r| r.env_steps).collect();
         let every: std::collections::BTreeSet<u64> =
             rs.iter().map(|r| r.train_config.eval_every).collect();
         let wall = rs.iter().map(|r| r.wall_seconds).sum::<f64>() / rs.len() as f64;
@@ -578,7 +578,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
                 series: Vec::new(),
                 x_scale: XScale::Linear,
             };
-            band_chart(&chart, &bands, 720, 440).save_png(&figures.join(&file))?;
+            band_chart(&chart, &bands, 1000, 440).save_png(&figures.join(&file))?;
             links.push(format!("![{m} {t}: {title}]({fig_link}/{file})"));
         }
         if !links.is_empty() {
