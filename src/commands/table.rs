@@ -310,8 +310,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     );
     for m in &mazes {
         let rs: Vec<&RunResult> = runs.iter().filter(|r| r.maze == *m).collect();
-        let steps: std::collections::BTreeSet<u64> =
-            rs.iter().map(|r| r.env_steps).collect();
+        let steps: std::collections::BTreeSet<u64> = rs.iter().map(|r| r.env_steps).collect();
         let every: std::collections::BTreeSet<u64> =
             rs.iter().map(|r| r.train_config.eval_every).collect();
         let wall = rs.iter().map(|r| r.wall_seconds).sum::<f64>() / rs.len() as f64;
