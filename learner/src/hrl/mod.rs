@@ -854,21 +854,7 @@ impl HrlAgent {
         }
         if steer {
             let gcp = self.gcp.as_mut().expect("steered traversal has π_g");
-            let goals: Vec<u32> = ctl
-                .envs
-                .iter()
-                .map(|c| {
-                    c.traversal
-                        .as_ref()
-                        .and_then(Traversal::waypoint)
-                        .unwrap_or(NO_GOAL)
-                })
-                .collect();
-            let fresh: Vec<bool> = ctl
-                .envs
-                .iter()
-                .map(|c| c.traversal.as_ref().is_some_and(Traversal::leg_starts))
-                .collect();
+            let (goals, fresh) = steer_targets(ctl);
             let state = ctl
                 .steer_state
                 .as_ref()
@@ -1107,21 +1093,9 @@ impl HrlAgent {
                 self.gcp.as_ref(),
                 ctl.steer_state.as_ref(),
             ) {
-                let goals: Vec<u32> = ctl
-                    .envs
-                    .iter()
-                    .map(|c| {
-                        c.traversal
-                            .as_ref()
-                            .and_then(Traversal::waypoint)
-                            .unwrap_or(NO_GOAL)
-                    })
-                    .collect();
-                let fresh: Vec<bool> = ctl
-                    .envs
-                    .iter()
-                    .map(|c| c.traversal.as_ref().is_none_or(Traversal::leg_starts))
-                    .collect();
+                // (Environments not steering bootstrap nothing: their last
+                // recorded step ended its goal episode.)
+                let (goals, fresh) = steer_targets(&ctl);
                 s.update(gcp, &obs, &goals, &state.reset_done(&mask(&fresh)));
             }
         }
@@ -1352,6 +1326,19 @@ impl HrlAgent {
         }
         Ok(())
     }
+}
+
+/// What `π_g` steers towards in each environment: the waypoint of its
+/// traversal (`NO_GOAL` where none is steered), and whether its core state
+/// starts afresh (a new edge begins).
+fn steer_targets(ctl: &Controller) -> (Vec<u32>, Vec<bool>) {
+    ctl.envs
+        .iter()
+        .map(|c| match &c.traversal {
+            Some(t) => (t.waypoint().unwrap_or(NO_GOAL), t.leg_starts()),
+            None => (NO_GOAL, false),
+        })
+        .unzip()
 }
 
 /// One Manager choice: the wide and narrow indices as trained, the goal
