@@ -6,18 +6,19 @@
 //! Layout: user header [`ActHeader`], payload `[u8]` of exactly `N` bytes.
 
 use bytemuck::{Pod, Zeroable};
+#[cfg(feature = "ipc")]
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::step::{check_len, check_range, check_run, check_version};
+use crate::step::{check_len, check_run, check_version};
 use crate::{Channel, MAX_ENVS, SCHEMA_VERSION, SchemaError};
 
 /// Number of distinct actions (MiniGrid numbering, `0..NUM_ACTIONS`).
 pub const NUM_ACTIONS: u8 = 7;
 
 /// Header of an action batch (iceoryx2 user header of `wg/<run>/act`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.ActHeader.v2"))]
 #[repr(C)]
-#[type_name("wg.ActHeader.v2")]
 pub struct ActHeader {
     /// [`SCHEMA_VERSION`] of the writer.
     pub schema_version: u32,
@@ -59,8 +60,9 @@ impl ActHeader {
 }
 
 /// Checks a batch size against [`MAX_ENVS`].
+#[cfg(feature = "ipc")]
 pub(crate) fn check_num_envs(num_envs: usize) -> Result<u32, SchemaError> {
-    check_range(Channel::Act, "num_envs", num_envs, MAX_ENVS)?;
+    crate::step::check_range(Channel::Act, "num_envs", num_envs, MAX_ENVS)?;
     Ok(num_envs as u32)
 }
 

@@ -17,10 +17,13 @@
 //! ```
 
 use bytemuck::{Pod, Zeroable};
+#[cfg(feature = "ipc")]
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::step::{check_len, check_range, check_run, check_version};
-use crate::{Channel, MAX_GRID_SIDE, SCHEMA_VERSION, SchemaError};
+use crate::step::{check_len, check_run, check_version};
+use crate::{Channel, SchemaError};
+#[cfg(feature = "ipc")]
+use crate::{MAX_GRID_SIDE, SCHEMA_VERSION, step::check_range};
 
 /// Most nodes (pivotal states) in a graph: one per cell of the largest grid.
 pub const MAX_PIVOTS: usize = crate::MAX_CELLS;
@@ -28,9 +31,9 @@ pub const MAX_PIVOTS: usize = crate::MAX_CELLS;
 pub const MAX_EDGES: usize = 1 << 20;
 
 /// One directed edge `from → to` of the world graph.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Pod, Zeroable)]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.GraphEdge.v2"))]
 #[repr(C)]
-#[type_name("wg.GraphEdge.v2")]
 pub struct GraphEdge {
     /// Source node id.
     pub from: u16,
@@ -41,9 +44,9 @@ pub struct GraphEdge {
 }
 
 /// Header of a graph snapshot (iceoryx2 user header of `wg/<run>/graph`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.GraphHeader.v2"))]
 #[repr(C)]
-#[type_name("wg.GraphHeader.v2")]
 pub struct GraphHeader {
     /// [`SCHEMA_VERSION`] of the writer.
     pub schema_version: u32,
@@ -105,6 +108,7 @@ pub(crate) fn check_counts(num_nodes: usize, num_edges: usize) -> Result<(), Sch
 }
 
 /// Checks a grid size against [`MAX_GRID_SIDE`].
+#[cfg(feature = "ipc")]
 pub(crate) fn check_grid(
     channel: Channel,
     width: usize,
@@ -163,6 +167,7 @@ pub struct GraphSnapshotMut<'a> {
 impl<'a> GraphSnapshotMut<'a> {
     /// Views `payload` as `num_nodes` nodes and `num_edges` edges, writing
     /// the counts and version into the header.
+    #[cfg(feature = "ipc")]
     pub(crate) fn new(
         header: &'a mut GraphHeader,
         payload: &'a mut [u32],

@@ -28,6 +28,12 @@
 //!   dead-node cleanup and teardown.
 //! - [`SeqTracker`]: lost/reordered batch accounting.
 //!
+//! The transport is the `ipc` feature (on by default): the iceoryx2
+//! services, the `ZeroCopySend` derives and the unsafe sample access. The
+//! simulator, the planner and the learner depend on this crate with default
+//! features off, so they use the wire types without building iceoryx2; the
+//! `worldgraph` binary, which runs the processes, turns `ipc` on.
+//!
 //! Every wire type is `#[repr(C)]`, [`bytemuck::Pod`] (no padding, checked
 //! at compile time), `ZeroCopySend` with a versioned type name
 //! (`wg.ObsHeader.v2`), with its size asserted at compile time. The only
@@ -35,11 +41,12 @@
 //! (`raw.rs`), each block justified.
 //!
 //! ```
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # #[cfg(feature = "ipc")] {
 //! use iceoryx2::prelude::*;
 //! use shm_schemas::service::{PipelineNode, RunName, isolated_config};
 //! use shm_schemas::{EnvMeta, ObsShape};
 //!
-//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let run = RunName::new("doc")?;
 //! let config = isolated_config(&format!("wgdoc_{}_", std::process::id()))?;
 //! let shape = ObsShape::new(2, 3, 3)?;
@@ -56,6 +63,7 @@
 //!
 //! let received = subscriber.receive()?.expect("sent above");
 //! assert_eq!(received.batch().cells, &[1; 18]);
+//! # }
 //! # Ok(())
 //! # }
 //! ```
@@ -66,8 +74,10 @@ mod backoff;
 mod error;
 mod graph;
 mod plan;
+#[cfg(feature = "ipc")]
 mod raw;
 mod seq;
+#[cfg(feature = "ipc")]
 pub mod service;
 mod step;
 
@@ -79,6 +89,7 @@ pub use plan::{
     MAX_ROUTE_LEN, MAX_ROUTE_PIVOTS, NO_PIVOT, RouteRequest, RouteResponse, RouteStatus,
     UNREACHABLE,
 };
+#[cfg(feature = "ipc")]
 pub use raw::monotonic_ns;
 pub use seq::{SeqEvent, SeqTracker};
 pub use step::{
@@ -90,7 +101,7 @@ pub use step::{
 /// type name ends in `.v<SCHEMA_VERSION>` and every header carries it.
 pub const SCHEMA_VERSION: u32 = 2;
 
-#[cfg(test)]
+#[cfg(all(test, feature = "ipc"))]
 mod tests {
     use super::*;
     use crate::raw::type_name_of;

@@ -10,6 +10,7 @@
 //! used prefixes of the arrays are meaningful.
 
 use bytemuck::{Pod, Zeroable};
+#[cfg(feature = "ipc")]
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::{Channel, SCHEMA_VERSION, SchemaError};
@@ -66,9 +67,9 @@ impl RouteStatus {
 
 /// A route query: from cell `from_cell` facing `from_dir` to pivotal state
 /// `to_pivot`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.RouteRequest.v2"))]
 #[repr(C)]
-#[type_name("wg.RouteRequest.v2")]
 pub struct RouteRequest {
     /// Chosen by the client, echoed in the response.
     pub request_id: u64,
@@ -124,9 +125,13 @@ impl RouteRequest {
 /// `cells[i]` the agent's cell after it, for `i < num_actions` (the start
 /// cell is the request's `from_cell`). Entries past the counts are stale;
 /// use the accessors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("wg.RouteResponse.v2")
+)]
 #[repr(C)]
-#[type_name("wg.RouteResponse.v2")]
 pub struct RouteResponse {
     /// The request's `request_id`.
     pub request_id: u64,

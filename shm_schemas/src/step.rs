@@ -24,6 +24,7 @@
 //! wraps them around real samples.
 
 use bytemuck::{Pod, Zeroable};
+#[cfg(feature = "ipc")]
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::{Channel, SCHEMA_VERSION, SchemaError};
@@ -62,9 +63,9 @@ pub mod flags {
 /// Position `x` is the column from the left, `y` the row from the top;
 /// `dir` is 0 right, 1 down, 2 left, 3 up; `carrying` is a cell code
 /// (`sim::Object as u8`) or [`EnvMeta::CARRYING_NOTHING`].
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.EnvMeta.v2"))]
 #[repr(C)]
-#[type_name("wg.EnvMeta.v2")]
 pub struct EnvMeta {
     /// Reward of the step that produced this record.
     pub reward: f32,
@@ -222,9 +223,9 @@ impl ObsShape {
 }
 
 /// Header of an observation batch (iceoryx2 user header of `wg/<run>/obs`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Pod, Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.ObsHeader.v2"))]
 #[repr(C)]
-#[type_name("wg.ObsHeader.v2")]
 pub struct ObsHeader {
     /// [`SCHEMA_VERSION`] of the writer.
     pub schema_version: u32,
