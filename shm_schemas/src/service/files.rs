@@ -20,21 +20,26 @@ pub fn harden_shm_permissions(prefix: &str) -> Result<Vec<PathBuf>, ShmError> {
     for (path, mode) in shm_files(prefix)? {
         if mode & 0o077 != 0 {
             let perms = std::fs::Permissions::from_mode(mode & 0o700);
-            match std::fs::set_permissions(&path, perms) {
-                Ok(()) => changed.push(path),
-                // Removed meanwhile by a peer's cleanup: nothing to protect.
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(source) => {
-                    return Err(ShmError::Io {
-                        op: "chmod",
-                        path,
-                        source,
-                    });
-                }
-            }
+            let done = std::fs::set_permissions(&path, perms);
+            changed.extend(unless_vanished("chmod", path, done)?);
         }
     }
     Ok(changed)
+}
+
+/// The outcome of `op` on `path`: the path if it succeeded, nothing if the
+/// file was removed meanwhile (a peer's cleanup got there first, which
+/// leaves nothing to do), the error otherwise.
+fn unless_vanished(
+    op: &'static str,
+    path: PathBuf,
+    done: std::io::Result<()>,
+) -> Result<Option<PathBuf>, ShmError> {
+    match done {
+        Ok(()) => Ok(Some(path)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) => Err(ShmError::Io { op, path, source }),
+    }
 }
 
 /// `/dev/shm/<prefix>*` files with their permission bits.
@@ -186,17 +191,8 @@ pub fn remove_global_mgmt(prefix: &str) -> Result<Vec<PathBuf>, ShmError> {
         if !path.to_string_lossy().ends_with("global_mgmt") {
             continue;
         }
-        match std::fs::remove_file(&path) {
-            Ok(()) => removed.push(path),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(source) => {
-                return Err(ShmError::Io {
-                    op: "remove",
-                    path,
-                    source,
-                });
-            }
-        }
+        let done = std::fs::remove_file(&path);
+        removed.extend(unless_vanished("remove", path, done)?);
     }
     Ok(removed)
 }
