@@ -6,7 +6,7 @@
 //! `+1` of CleanRL's `[T + 1, B]` layout). Three ways to fill it, chosen by
 //! [`GradPath`]:
 //!
-//! - [`GradPath::Recompute`] (the default): each step runs the network under
+//! - [`GradPath::Recompute`]: each step runs the network under
 //!   `no_grad` on a [`CellInput`] and appends that input; the update
 //!   re-encodes all `T·B` observations in one batched call, unrolls the
 //!   LSTM over the stored features from the stored initial state (resetting
