@@ -78,7 +78,8 @@ pub struct PlannerConfig {
     pub edge_search: EdgeSearch,
     /// Shorten every discovered edge with an exact breadth-first search
     /// that does not touch a third node ([`crate::edges::shorten_edge`]),
-    /// standing in for the paper's refinement by `π_g`.
+    /// where no learned policy refines them (the paper refines with `π_g`,
+    /// as world graph discovery does).
     pub shorten: bool,
     /// The task whose rules the walks follow (balls are collected by
     /// stepping on them in the MultiGoal tasks and block the way in

@@ -36,8 +36,12 @@
 //! [`shorten_edge`] replaces an edge path by an exact shortest one: a
 //! breadth-first search over (pose, world) states with the walk policy's
 //! actions, from the four facings on `p`, never standing on a third node
-//! and never passing through the end of an episode. It stands in for the
-//! paper's refinement by `π_g` until the learned policy is wired in.
+//! and never passing through the end of an episode. World graph discovery
+//! refines its edges with `π_g` instead, as the paper does (the learner's
+//! `edge_refinement`, which turns this off); the exact search serves a
+//! planner process given nodes without a learned policy, and `discover`'s
+//! report, which compares routes over `π_g`'s edges with routes over exact
+//! ones (`route_stretch_exact`).
 //!
 //! ## Determinism
 //! Walks from node `i` draw from their own RNG seeded by `(seed, i)` and run
