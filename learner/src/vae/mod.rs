@@ -23,9 +23,9 @@
 //! [`LatentModel::reconstruction_error`]).
 //!
 //! Threads: these networks are small, and libtorch's intra-op worker
-//! threads cost more than they save on them. With `tch::set_num_threads(1)`
-//! a training step of the doorway test (`[L ≈ 25, B = 32]`) took 36 ms on a
-//! loaded 2-core machine, against 180–700 ms with the default pool.
+//! threads cost more than they save on them, so the binary runs libtorch on
+//! one thread by default (figures in `docs/implementation_details.md`,
+//! "Learner throughput").
 //!
 //! ```no_run
 //! use learner::vae::{AgentPose, LatentConfig, LatentTrainer, Trajectory, TrajectoryBatch};
