@@ -85,7 +85,7 @@ pub struct DiscoveryConfig {
     /// ([`LoopErasedRoute`]): a half-trained `π_g` reaches its goals with
     /// detours (turning back and forth, stepping into walls), and what is
     /// left is the way it found, the kind of trajectory whose actions the
-    /// pivotal states should explain (section 3.1).
+    /// pivotal states should explain (section 3.1). Off by default.
     pub loop_erase_goal_trajectories: bool,
     /// Make the recorded path to each cell the shortest the agent knows:
     /// at the start of every round, a breadth-first search from the start
@@ -97,6 +97,7 @@ pub struct DiscoveryConfig {
     /// along these paths are training data too, and a shortest turn-and-move
     /// path across rooms is the kind of trajectory whose actions the
     /// doorways explain (section 3.1, `learner/tests/pivotal_doorways.rs`).
+    /// Off by default.
     pub shortest_known_paths: bool,
     /// The latent model.
     pub latent: LatentConfig,
@@ -124,8 +125,11 @@ impl Default for DiscoveryConfig {
             gcp_iters_per_round: 100,
             pivotal_ratio: 0.2,
             goal_curriculum: GoalCurriculum::default(),
-            loop_erase_goal_trajectories: true,
-            shortest_known_paths: true,
+            // The three levers of issue 12's second pass stay off: none beat
+            // the loop without them (docs/implementation_details.md, "Second
+            // pass").
+            loop_erase_goal_trajectories: false,
+            shortest_known_paths: false,
             latent: LatentConfig::default(),
             gcp: GcpConfig::default(),
         }
@@ -171,8 +175,9 @@ impl DiscoveryConfig {
 /// one by its two ends alone (section 3.1). So goals start within
 /// [`GcpConfig::goal_walk_len`] moves, and after each round in which `π_g`
 /// reached at least `success_threshold` of its training goals the
-/// distance grows by `step` moves, up to `max_moves`. The distance is part
-/// of the checkpoint, so a resumed run goes on at the distance it reached.
+/// distance grows by `step` moves, up to `max_moves` (`step = 0`, the
+/// default, keeps it at `goal_walk_len`). The distance is part of the
+/// checkpoint, so a resumed run goes on at the distance it reached.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GoalCurriculum {
@@ -189,7 +194,8 @@ pub struct GoalCurriculum {
 impl Default for GoalCurriculum {
     fn default() -> Self {
         GoalCurriculum {
-            step: 2,
+            // Off (see `DiscoveryConfig::default`); `step = 2` turns it on.
+            step: 0,
             success_threshold: 0.5,
             max_moves: 16,
         }
@@ -613,7 +619,9 @@ impl Discovery {
                     match w.pending.take() {
                         None => w.route.reset(pose),
                         Some(a) => {
-                            if let Some(&before) = w.route.poses.last() {
+                            if let Some(&before) = w.route.poses.last()
+                                && cfg.shortest_known_paths
+                            {
                                 observe(&mut self.state.experience, before, a, pose);
                             }
                             w.route.push(a, pose);
@@ -733,8 +741,10 @@ impl Discovery {
             for s in &t.states {
                 *self.state.visits.entry(s.cell).or_default() += 1;
             }
-            for (k, &a) in t.actions.iter().enumerate() {
-                observe(&mut self.state.experience, t.states[k], a, t.states[k + 1]);
+            if cfg.shortest_known_paths {
+                for (k, &a) in t.actions.iter().enumerate() {
+                    observe(&mut self.state.experience, t.states[k], a, t.states[k + 1]);
+                }
             }
         }
         let goal_trajectories: Vec<Trajectory> = if cfg.loop_erase_goal_trajectories {
@@ -1205,6 +1215,7 @@ mod tests {
         cfg.goal_curriculum.success_threshold = 0.0;
         assert!(cfg.validate().is_err());
         cfg.goal_curriculum.success_threshold = 0.5;
+        cfg.goal_curriculum.step = 2;
         cfg.goal_curriculum.max_moves = cfg.gcp.goal_walk_len - 1;
         let err = cfg.validate().expect_err("max_moves below the start");
         assert!(

@@ -90,8 +90,9 @@ pub struct GcpConfig {
     pub curiosity_coef: f64,
     /// Record for the latent model the goal episodes `π_g` missed as well
     /// (a chain's last leg when it timed out or the environment's episode
-    /// ended). Off: a chain is recorded up to its last reached goal, so
-    /// `π_g`'s trajectories are navigation, not wandering (see [`GoalBook`]).
+    /// ended; the default). Off: a chain is recorded up to its last reached
+    /// goal, so `π_g`'s trajectories are navigation, not wandering (see
+    /// [`GoalBook`]).
     pub record_missed_legs: bool,
     /// Output channels of the encoder's two convolutions.
     pub conv_channels: [i64; 2],
@@ -114,7 +115,9 @@ impl Default for GcpConfig {
             goal_reward: 1.0,
             step_penalty: -0.01,
             curiosity_coef: 0.004,
-            record_missed_legs: false,
+            // Recording only up to the last reached goal did not make `V_p`
+            // better (docs/implementation_details.md, "Second pass").
+            record_missed_legs: true,
             conv_channels: [16, 32],
             hidden: 64,
         }
@@ -393,11 +396,11 @@ struct GoalStep {
 /// single leg's actions follow from its two ends alone. The A2C episodes
 /// (rewards, done flags, LSTM resets) are the single goals either way.
 ///
-/// A chain that ends with a missed goal is recorded up to the last goal it
-/// reached, and not at all if it reached none (unless
-/// [`GcpConfig::record_missed_legs`]): a missed leg is `π_g` wandering,
-/// which is what the random walks already give, while the latent model
-/// needs `π_g`'s navigation "between close-by states" (section 3.2).
+/// With [`GcpConfig::record_missed_legs`] off, a chain that ends with a
+/// missed goal is recorded up to the last goal it reached, and not at all
+/// if it reached none: a missed leg is `π_g` wandering, which is what the
+/// random walks already give, while the latent model is meant to see
+/// `π_g`'s navigation "between close-by states" (section 3.2).
 #[derive(Debug)]
 struct GoalBook {
     walk_len: usize,
@@ -1200,7 +1203,10 @@ mod tests {
     fn a_chain_that_reaches_no_goal_is_not_recorded() {
         let layout = room();
         let mut sampler = GoalSampler::new(&layout, 8);
-        let mut book = GoalBook::new(3, 2, true);
+        let mut book = GoalBook {
+            record_missed_legs: false,
+            ..GoalBook::new(3, 2, true)
+        };
         let start = 2 * layout.width as u32 + 2;
         with_obs(start, |obs| book.sync(&mut sampler, obs));
         assert!(!book_step(&mut book, &mut sampler, start).goal_done);
