@@ -78,6 +78,27 @@ pub struct DiscoveryConfig {
     pub gcp_iters_per_round: u32,
     /// Fraction of visited cells that become pivotal states (paper: 0.2).
     pub pivotal_ratio: f64,
+    /// How far `π_g`'s training goals lie, round by round.
+    pub goal_curriculum: GoalCurriculum,
+    /// Erase the loops of `π_g`'s recorded trajectories before the latent
+    /// model sees them, as the walks' recorded paths are
+    /// ([`LoopErasedRoute`]): a half-trained `π_g` reaches its goals with
+    /// detours (turning back and forth, stepping into walls), and what is
+    /// left is the way it found, the kind of trajectory whose actions the
+    /// pivotal states should explain (section 3.1). Off by default.
+    pub loop_erase_goal_trajectories: bool,
+    /// Make the recorded path to each cell the shortest the agent knows:
+    /// at the start of every round, a breadth-first search from the start
+    /// pose over every transition it has observed (pose, action → pose, from
+    /// the walks and `π_g`'s trajectories: its own experience, no map is
+    /// consulted). Section 3.2: "the agent can straightforwardly document
+    /// and reuse the paths from its initial position to states in `V_p`";
+    /// a walk's own path, even with its loops erased, wanders. The replays
+    /// along these paths are training data too, and a shortest turn-and-move
+    /// path across rooms is the kind of trajectory whose actions the
+    /// doorways explain (section 3.1, `learner/tests/pivotal_doorways.rs`).
+    /// Off by default.
+    pub shortest_known_paths: bool,
     /// The latent model.
     pub latent: LatentConfig,
     /// The goal-conditioned policy.
@@ -103,6 +124,12 @@ impl Default for DiscoveryConfig {
             // at 8 per round it never did within the loop's 6–11 rounds.
             gcp_iters_per_round: 100,
             pivotal_ratio: 0.2,
+            goal_curriculum: GoalCurriculum::default(),
+            // The three levers of issue 12's second pass stay off: none beat
+            // the loop without them (docs/implementation_details.md, "Second
+            // pass").
+            loop_erase_goal_trajectories: false,
+            shortest_known_paths: false,
             latent: LatentConfig::default(),
             gcp: GcpConfig::default(),
         }
@@ -133,8 +160,78 @@ impl DiscoveryConfig {
         if self.latent_batch == 0 || self.buffer < self.latent_batch {
             return bad("latent_batch", "must be at least 1 and at most buffer");
         }
+        self.goal_curriculum.validate(self.gcp.goal_walk_len)?;
         self.latent.validate()?;
         self.gcp.validate()?;
+        Ok(())
+    }
+}
+
+/// A curriculum on the distance of `π_g`'s training goals. The paper draws
+/// goals at "the end points of random walks with reasonable length"
+/// (section 3.2) and leaves the length open. Near goals are what `π_g`
+/// learns first, far goals are what the latent model needs: a trajectory
+/// whose legs cross rooms is explained by the doorways it passes, a short
+/// one by its two ends alone (section 3.1). So goals start within
+/// [`GcpConfig::goal_walk_len`] moves, and after each round in which `π_g`
+/// reached at least `success_threshold` of its training goals the
+/// distance grows by `step` moves, up to `max_moves` (`step = 0`, the
+/// default, keeps it at `goal_walk_len`). The distance is part of the
+/// checkpoint, so a resumed run goes on at the distance it reached.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GoalCurriculum {
+    /// Moves added to the goal distance after a round that passed
+    /// `success_threshold` (0: the distance stays at `goal_walk_len`).
+    pub step: usize,
+    /// Training success rate of a round (mean over its A2C iterations) at
+    /// which the next round's goals lie `step` moves farther.
+    pub success_threshold: f64,
+    /// The farthest goal distance, in moves.
+    pub max_moves: usize,
+}
+
+impl Default for GoalCurriculum {
+    fn default() -> Self {
+        GoalCurriculum {
+            // Off (see `DiscoveryConfig::default`); `step = 2` turns it on.
+            step: 0,
+            success_threshold: 0.5,
+            max_moves: 16,
+        }
+    }
+}
+
+impl GoalCurriculum {
+    /// The distance of the round after one at `moves` whose training
+    /// success rate was `success`.
+    pub fn next(&self, moves: usize, success: f64) -> usize {
+        if success >= self.success_threshold {
+            (moves + self.step).min(self.max_moves.max(moves))
+        } else {
+            moves
+        }
+    }
+
+    fn validate(&self, start: usize) -> Result<(), LearnerError> {
+        let bad = |field: &'static str, reason: String| {
+            Err(LearnerError::Config(crate::ConfigError::new(field, reason)))
+        };
+        if !(self.success_threshold > 0.0 && self.success_threshold <= 1.0) {
+            return bad(
+                "goal_curriculum.success_threshold",
+                format!("{} must be in (0, 1]", self.success_threshold),
+            );
+        }
+        if self.step > 0 && self.max_moves < start {
+            return bad(
+                "goal_curriculum.max_moves",
+                format!(
+                    "{} must be at least gcp.goal_walk_len ({start})",
+                    self.max_moves
+                ),
+            );
+        }
         Ok(())
     }
 }
@@ -160,6 +257,14 @@ pub struct RoundStats {
     pub gcp_success: f64,
     /// Mean curiosity bonus of `π_g`'s rollouts.
     pub gcp_curiosity: f64,
+    /// The most moves away `π_g`'s training goals lay in the round
+    /// ([`GoalCurriculum`]; 0 in histories written before it was kept).
+    #[serde(default)]
+    pub goal_distance: usize,
+    /// `π_g` trajectories the round gave the latent model (chains up to
+    /// their last reached goal, loops erased).
+    #[serde(default)]
+    pub goal_trajectories: usize,
     /// Distinct cells visited so far.
     pub cells_visited: usize,
     /// Size of `V_p` after the round.
@@ -194,6 +299,16 @@ struct State {
     /// its weights; `None` only in checkpoints written before they were kept.
     #[serde(default)]
     multipliers: Option<crate::vae::Multipliers>,
+    /// The most moves away `π_g`'s training goals lie in the next round
+    /// ([`GoalCurriculum`]); 0 in checkpoints written before it was kept
+    /// (read as `gcp.goal_walk_len`).
+    #[serde(default)]
+    goal_distance: usize,
+    /// Every transition observed so far: [`transition_key`] of (pose,
+    /// action) → the pose it led to as `(cell, direction, carried)`
+    /// ([`DiscoveryConfig::shortest_known_paths`]).
+    #[serde(default)]
+    experience: BTreeMap<u64, (u32, u8, u8)>,
 }
 
 /// The discovery loop's models and bookkeeping.
@@ -314,6 +429,7 @@ impl Discovery {
         cfg.validate()?;
         let latent = LatentTrainer::new(&cfg.latent, tch::Device::Cpu, cfg.seed)?;
         let gcp = GoalConditionedPolicy::new(&cfg.gcp, layout, num_envs, num_actions, cfg.seed)?;
+        let goal_distance = cfg.gcp.goal_walk_len;
         let state = State {
             config: cfg,
             layout_name: layout.name.clone(),
@@ -327,6 +443,8 @@ impl Discovery {
             buffer: Vec::new(),
             gcp_buffer: Vec::new(),
             multipliers: None,
+            goal_distance,
+            experience: BTreeMap::new(),
         };
         Ok(Discovery {
             layout: layout.clone(),
@@ -406,6 +524,49 @@ impl Discovery {
         self.latent.model().prior_mean(&cells)
     }
 
+    /// Replaces each recorded path by the shortest action sequence from
+    /// `start` through the observed transitions, where that is shorter
+    /// ([`DiscoveryConfig::shortest_known_paths`]). Breadth-first over
+    /// poses, actions in ascending order, so the result is a function of
+    /// the experience alone.
+    fn shorten_paths(&mut self, start: AgentPose) {
+        let experience = &self.state.experience;
+        let mut parent: std::collections::HashMap<AgentPose, (AgentPose, u8)> =
+            std::collections::HashMap::new();
+        let mut seen = std::collections::HashSet::from([start]);
+        let mut queue = std::collections::VecDeque::from([start]);
+        let mut reached_cells = std::collections::HashSet::from([start.cell]);
+        while let Some(p) = queue.pop_front() {
+            let from = transition_key(p, 0);
+            for (&key, &(cell, direction, carried)) in experience.range(from..from + 256) {
+                let q = AgentPose {
+                    cell,
+                    direction,
+                    carried,
+                };
+                if !seen.insert(q) {
+                    continue;
+                }
+                parent.insert(q, (p, (key & 0xff) as u8));
+                queue.push_back(q);
+                if reached_cells.insert(q.cell) {
+                    // The first pose of a cell reached is one of its nearest.
+                    let mut path = Vec::new();
+                    let mut at = q;
+                    while let Some(&(before, a)) = parent.get(&at) {
+                        path.push(a);
+                        at = before;
+                    }
+                    path.reverse();
+                    let known = self.state.paths.get(&q.cell).map_or(usize::MAX, Vec::len);
+                    if path.len() < known {
+                        self.state.paths.insert(q.cell, path);
+                    }
+                }
+            }
+        }
+    }
+
     /// Step 1: random walks from the start and from pivotal states.
     ///
     /// Each environment runs a small state machine: reset to the start;
@@ -434,6 +595,11 @@ impl Discovery {
                 actions: Vec::new(),
             })
             .collect();
+        if cfg.shortest_known_paths {
+            // Every environment was just reset: the agent is at the start.
+            let start = pose_of(&env.observe().meta[0], width);
+            self.shorten_paths(start);
+        }
         let mut out = Vec::new();
         let mut actions = vec![0u8; n];
         let steps = cfg.walk_steps_per_round as u64;
@@ -452,7 +618,14 @@ impl Discovery {
                 } else {
                     match w.pending.take() {
                         None => w.route.reset(pose),
-                        Some(a) => w.route.push(a, pose),
+                        Some(a) => {
+                            if let Some(&before) = w.route.poses.last()
+                                && cfg.shortest_known_paths
+                            {
+                                observe(&mut self.state.experience, before, a, pose);
+                            }
+                            w.route.push(a, pose);
+                        }
                     }
                 }
                 let awaiting_outcome = !w.actions.is_empty() && w.states.len() == w.actions.len();
@@ -541,6 +714,11 @@ impl Discovery {
         self.latent.model_mut().reseed_noise(round_seed);
         self.latent.reset_optimizer()?;
         self.gcp.start_round(round_seed)?;
+        let goal_distance = match self.state.goal_distance {
+            0 => cfg.gcp.goal_walk_len,
+            d => d,
+        };
+        self.gcp.set_goal_distance(goal_distance);
         let n = env.num_envs();
         env.step(&vec![action::RESET; n])
             .map_err(LearnerError::from)?;
@@ -563,8 +741,23 @@ impl Discovery {
             for s in &t.states {
                 *self.state.visits.entry(s.cell).or_default() += 1;
             }
+            if cfg.shortest_known_paths {
+                for (k, &a) in t.actions.iter().enumerate() {
+                    observe(&mut self.state.experience, t.states[k], a, t.states[k + 1]);
+                }
+            }
         }
-        let collected = walks.len() + goal_trajectories.len();
+        let goal_trajectories: Vec<Trajectory> = if cfg.loop_erase_goal_trajectories {
+            goal_trajectories
+                .iter()
+                .map(loop_erased)
+                .filter(|t| !t.actions.is_empty())
+                .collect()
+        } else {
+            goal_trajectories
+        };
+        let goal_count = goal_trajectories.len();
+        let collected = walks.len() + goal_count;
 
         // 2. The latent model, on the newest `buffer` trajectories of both
         // sources. A share of this round's trajectories of each source is
@@ -622,6 +815,8 @@ impl Discovery {
                 gcp_stats.iter().map(f).sum::<f64>() / gcp_stats.len() as f64
             }
         };
+        let gcp_success = mean(|s| s.success_rate);
+        self.state.goal_distance = cfg.goal_curriculum.next(goal_distance, gcp_success);
         let stats = RoundStats {
             round,
             env_steps,
@@ -629,8 +824,10 @@ impl Discovery {
             reconstruction_accuracy: accuracy,
             kl: last.as_ref().map_or(0.0, |s| s.kl),
             kept_fraction: eval.as_ref().map_or(0.0, |e| e.kept_fraction),
-            gcp_success: mean(|s| s.success_rate),
+            gcp_success,
             gcp_curiosity: mean(|s| s.mean_curiosity),
+            goal_distance,
+            goal_trajectories: goal_count,
             cells_visited: self.state.visits.len(),
             pivotal_states: self.state.pivotal.len(),
             seconds: t0.elapsed().as_secs_f64(),
@@ -744,6 +941,43 @@ impl Discovery {
     ) -> Result<RefinementStats, LearnerError> {
         refine_with_gcp(graph, &mut self.gcp)
     }
+}
+
+/// The key of (pose, action) in the observed transitions: the pose's cell,
+/// direction and carried object, then the action, one per byte but the cell.
+fn transition_key(pose: AgentPose, action: u8) -> u64 {
+    (u64::from(pose.cell) << 24)
+        | (u64::from(pose.direction) << 16)
+        | (u64::from(pose.carried) << 8)
+        | u64::from(action)
+}
+
+/// Books that `action` took the agent from `before` to `after`.
+fn observe(
+    experience: &mut BTreeMap<u64, (u32, u8, u8)>,
+    before: AgentPose,
+    action: u8,
+    after: AgentPose,
+) {
+    experience.entry(transition_key(before, action)).or_insert((
+        after.cell,
+        after.direction,
+        after.carried,
+    ));
+}
+
+/// `t` with its loops erased ([`LoopErasedRoute`]): same first and last
+/// pose, every pose at most once.
+fn loop_erased(t: &Trajectory) -> Trajectory {
+    let mut route = LoopErasedRoute::default();
+    let Some(&start) = t.states.first() else {
+        return t.clone();
+    };
+    route.reset(start);
+    for (&a, &pose) in t.actions.iter().zip(&t.states[1..]) {
+        route.push(a, pose);
+    }
+    route.trajectory()
 }
 
 fn finish(w: &mut Walker, out: &mut Vec<Trajectory>) {
@@ -884,4 +1118,111 @@ pub fn config_difference(saved: &DiscoveryConfig, now: &DiscoveryConfig) -> Opti
         serde_json::to_value(now).ok()?,
     );
     walk("", &a, &b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose(cell: u32, direction: u8) -> AgentPose {
+        AgentPose {
+            cell,
+            direction,
+            carried: 0,
+        }
+    }
+
+    #[test]
+    fn loop_erasure_keeps_the_ends_and_drops_the_detours() {
+        use sim::action::{FORWARD, LEFT, RIGHT};
+        // Forward, a turn left and back (a loop on the pose), into a wall
+        // (no move: a loop of one step), forward again.
+        let t = Trajectory {
+            states: vec![
+                pose(1, 0),
+                pose(2, 0),
+                pose(2, 3),
+                pose(2, 0),
+                pose(2, 0),
+                pose(3, 0),
+            ],
+            actions: vec![FORWARD, LEFT, RIGHT, FORWARD, FORWARD],
+        };
+        let erased = loop_erased(&t);
+        assert_eq!(erased.states, vec![pose(1, 0), pose(2, 0), pose(3, 0)]);
+        assert_eq!(erased.actions, vec![FORWARD, FORWARD]);
+        // A trajectory without loops is left as it is.
+        assert_eq!(loop_erased(&erased), erased);
+    }
+
+    #[test]
+    fn recorded_paths_become_the_shortest_through_observed_transitions() {
+        use sim::action::{FORWARD, LEFT, RIGHT};
+        let layout = Layout::parse("room", "#####\n#>..#\n#..E#\n#####\n").expect("layout");
+        let mut d = Discovery::new(DiscoveryConfig::default(), &layout, 1, 3).expect("discovery");
+        // Cells 6, 7, 8 along the top row, 11, 12, 13 below (13 the exit,
+        // which the search treats as any cell); the agent starts on 6
+        // facing right (direction 0).
+        let e = &mut d.state.experience;
+        observe(e, pose(6, 0), FORWARD, pose(7, 0));
+        observe(e, pose(7, 0), FORWARD, pose(8, 0));
+        observe(e, pose(8, 0), RIGHT, pose(8, 1));
+        observe(e, pose(8, 1), FORWARD, pose(13, 1));
+        // A detour the walk took: down first, then along the bottom row.
+        observe(e, pose(6, 0), RIGHT, pose(6, 1));
+        observe(e, pose(6, 1), FORWARD, pose(11, 1));
+        observe(e, pose(11, 1), LEFT, pose(11, 0));
+        observe(e, pose(11, 0), FORWARD, pose(12, 0));
+        // Seen, but never from a pose the agent can reach from the start.
+        observe(e, pose(12, 2), FORWARD, pose(11, 2));
+        let walked = vec![FORWARD, LEFT, RIGHT, FORWARD, RIGHT, RIGHT, LEFT, FORWARD];
+        d.state.paths.insert(13, walked);
+        d.state.paths.insert(12, vec![FORWARD; 9]);
+        d.shorten_paths(pose(6, 0));
+        assert_eq!(d.state.paths[&13], vec![FORWARD, FORWARD, RIGHT, FORWARD]);
+        assert_eq!(d.state.paths[&12], vec![RIGHT, FORWARD, LEFT, FORWARD]);
+        assert_eq!(d.state.paths[&8], vec![FORWARD, FORWARD]);
+        assert_eq!(d.state.paths[&11], vec![RIGHT, FORWARD]);
+        assert!(
+            !d.state.paths.contains_key(&6),
+            "no path to the start's own cell"
+        );
+        // A shorter recorded path is kept.
+        d.state.paths.insert(13, vec![FORWARD]);
+        d.shorten_paths(pose(6, 0));
+        assert_eq!(d.state.paths[&13], vec![FORWARD]);
+    }
+
+    #[test]
+    fn the_goal_distance_grows_with_success_up_to_its_cap() {
+        let c = GoalCurriculum {
+            step: 2,
+            success_threshold: 0.5,
+            max_moves: 9,
+        };
+        assert_eq!(c.next(6, 0.49), 6);
+        assert_eq!(c.next(6, 0.5), 8);
+        assert_eq!(c.next(8, 0.9), 9);
+        assert_eq!(c.next(9, 1.0), 9);
+        let off = GoalCurriculum { step: 0, ..c };
+        assert_eq!(off.next(6, 1.0), 6);
+    }
+
+    #[test]
+    fn curriculum_settings_are_checked() {
+        let mut cfg = DiscoveryConfig::default();
+        assert!(cfg.validate().is_ok());
+        cfg.goal_curriculum.success_threshold = 0.0;
+        assert!(cfg.validate().is_err());
+        cfg.goal_curriculum.success_threshold = 0.5;
+        cfg.goal_curriculum.step = 2;
+        cfg.goal_curriculum.max_moves = cfg.gcp.goal_walk_len - 1;
+        let err = cfg.validate().expect_err("max_moves below the start");
+        assert!(
+            err.to_string().contains("goal_curriculum.max_moves"),
+            "{err}"
+        );
+        cfg.goal_curriculum.step = 0;
+        assert!(cfg.validate().is_ok(), "no curriculum, no cap to check");
+    }
 }

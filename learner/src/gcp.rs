@@ -88,6 +88,12 @@ pub struct GcpConfig {
     /// policy that had reached 98 % of its goals learned to wander (22 %
     /// within one round).
     pub curiosity_coef: f64,
+    /// Record for the latent model the goal episodes `π_g` missed as well
+    /// (a chain's last leg when it timed out or the environment's episode
+    /// ended; the default). Off: a chain is recorded up to its last reached
+    /// goal, so `π_g`'s trajectories are navigation, not wandering (see
+    /// [`GoalBook`]).
+    pub record_missed_legs: bool,
     /// Output channels of the encoder's two convolutions.
     pub conv_channels: [i64; 2],
     /// Width of the encoder's output and of the LSTM core.
@@ -109,6 +115,9 @@ impl Default for GcpConfig {
             goal_reward: 1.0,
             step_penalty: -0.01,
             curiosity_coef: 0.004,
+            // Recording only up to the last reached goal did not make `V_p`
+            // better (docs/implementation_details.md, "Second pass").
+            record_missed_legs: true,
             conv_channels: [16, 32],
             hidden: 64,
         }
@@ -353,6 +362,9 @@ struct GoalEpisode {
     steps: u32,
     /// Goals reached before this one within `trajectory`.
     legs: usize,
+    /// Actions of `trajectory` up to the last goal it reached (0 before
+    /// the first): where the recorded trajectory ends when this leg fails.
+    reached: usize,
     /// `(s_t, a_t)` since the chain's first goal was drawn; `states` ends
     /// with the pose the agent stands on now.
     trajectory: Trajectory,
@@ -383,6 +395,12 @@ struct GoalStep {
 /// next) carry the information the latent model is meant to find; a
 /// single leg's actions follow from its two ends alone. The A2C episodes
 /// (rewards, done flags, LSTM resets) are the single goals either way.
+///
+/// With [`GcpConfig::record_missed_legs`] off, a chain that ends with a
+/// missed goal is recorded up to the last goal it reached, and not at all
+/// if it reached none: a missed leg is `π_g` wandering, which is what the
+/// random walks already give, while the latent model is meant to see
+/// `π_g`'s navigation "between close-by states" (section 3.2).
 #[derive(Debug)]
 struct GoalBook {
     walk_len: usize,
@@ -391,6 +409,8 @@ struct GoalBook {
     /// Trajectories of finished goal episodes (kept only when recording).
     finished: Vec<Trajectory>,
     record: bool,
+    /// Record a chain's missed last leg too ([`GcpConfig::record_missed_legs`]).
+    record_missed_legs: bool,
 }
 
 fn pose_of(meta: &EnvMeta) -> Pose {
@@ -418,6 +438,7 @@ impl GoalBook {
             episodes: Vec::new(),
             finished: Vec::new(),
             record,
+            record_missed_legs: false,
         }
     }
 
@@ -438,6 +459,7 @@ impl GoalBook {
             goal,
             steps: 0,
             legs: 0,
+            reached: 0,
             trajectory: Trajectory {
                 states: vec![agent_pose(meta, width)],
                 actions: Vec::new(),
@@ -517,11 +539,19 @@ impl GoalBook {
                 let mut next = self.fresh_episode(sampler, meta, width);
                 if let Some(trajectory) = kept {
                     next.legs = legs;
+                    next.reached = trajectory.actions.len();
                     next.trajectory = trajectory;
                 }
-                let done = std::mem::replace(&mut self.episodes[i], next);
-                if self.record && !chained && !done.trajectory.actions.is_empty() {
-                    self.finished.push(done.trajectory);
+                let mut done = std::mem::replace(&mut self.episodes[i], next);
+                if self.record && !chained {
+                    if !success && !self.record_missed_legs {
+                        // Up to the last goal reached: the missed leg goes.
+                        done.trajectory.actions.truncate(done.reached);
+                        done.trajectory.states.truncate(done.reached + 1);
+                    }
+                    if !done.trajectory.actions.is_empty() {
+                        self.finished.push(done.trajectory);
+                    }
                 }
             }
         }
@@ -613,11 +643,14 @@ impl GoalConditionedPolicy {
             sampler: GoalSampler::new(layout, seed),
             eval_sampler: GoalSampler::new(layout, seed ^ EVAL_SEED_SALT),
             action_rng: SmallRng::seed_from_u64(seed ^ ACTION_SEED_SALT),
-            book: GoalBook::new(
-                cfg.goal_walk_len,
-                cfg.goal_time_limit(cfg.goal_walk_len),
-                true,
-            ),
+            book: GoalBook {
+                record_missed_legs: cfg.record_missed_legs,
+                ..GoalBook::new(
+                    cfg.goal_walk_len,
+                    cfg.goal_time_limit(cfg.goal_walk_len),
+                    true,
+                )
+            },
             state,
             rollout: Rollout::new(
                 GradPath::default(),
@@ -655,6 +688,23 @@ impl GoalConditionedPolicy {
         self.book.finished.clear();
         self.opt = nn::Adam::default().build(&self.vs, self.cfg.learning_rate)?;
         Ok(())
+    }
+
+    /// Training goals from now on lie 1 to `moves` moves away by path
+    /// distance, with the time limit `goal_time_limit(moves)`: the step of
+    /// a goal-distance curriculum ([`crate::discovery::GoalCurriculum`]).
+    /// Open goal episodes keep the goals they have. Evaluation is
+    /// unaffected (it names its own distance).
+    pub fn set_goal_distance(&mut self, moves: usize) {
+        let moves = moves.max(1);
+        self.book.walk_len = moves;
+        self.book.time_limit = self.cfg.goal_time_limit(moves);
+    }
+
+    /// The most moves away a training goal may currently lie
+    /// ([`Self::set_goal_distance`]; `goal_walk_len` until it is called).
+    pub fn goal_distance(&self) -> usize {
+        self.book.walk_len
     }
 
     /// The configuration.
@@ -1074,6 +1124,94 @@ mod tests {
             (0..20).map(|_| s.draw(from, 4)).collect::<Vec<_>>()
         };
         assert_eq!(draws(3), draws(3));
+    }
+
+    /// The observation of one environment of [`room`] whose agent stands
+    /// on `cell` facing right, handed to `f`.
+    fn with_obs<R>(cell: u32, f: impl FnOnce(&ObsView<'_>) -> R) -> R {
+        let layout = room();
+        let w = layout.width as u32;
+        let meta = [EnvMeta {
+            x: (cell % w) as u16,
+            y: (cell / w) as u16,
+            carrying: EnvMeta::CARRYING_NOTHING,
+            ..EnvMeta::EMPTY
+        }];
+        let cells = vec![0u8; layout.cells.len()];
+        f(&ObsView {
+            seq: 0,
+            cells: &cells,
+            meta: &meta,
+            width: layout.width,
+            height: layout.height,
+        })
+    }
+
+    /// Books a forward step after which the agent stands on `cell`.
+    fn book_step(book: &mut GoalBook, sampler: &mut GoalSampler, cell: u32) -> GoalStep {
+        with_obs(cell, |obs| {
+            book.advance(sampler, obs, &[sim::action::FORWARD], &GcpConfig::default())[0]
+        })
+    }
+
+    /// Records what a chain that reaches one goal, then misses the next,
+    /// leaves for the latent model: (start cell, first goal, recorded).
+    fn chain_with_a_missed_leg(record_missed_legs: bool) -> (u32, u32, Vec<Trajectory>) {
+        let layout = room();
+        let mut sampler = GoalSampler::new(&layout, 5);
+        let mut book = GoalBook {
+            record_missed_legs,
+            ..GoalBook::new(3, 4, true)
+        };
+        let start = 3 * layout.width as u32 + 3;
+        with_obs(start, |obs| book.sync(&mut sampler, obs));
+        let first = book.goals()[0];
+        assert_ne!(first, start);
+        assert!(book_step(&mut book, &mut sampler, first).success);
+        assert!(
+            book.finished.is_empty(),
+            "the chain goes on after a reached goal"
+        );
+        // The second goal is never reached: the agent stays on the first
+        // goal's cell (a goal is never the agent's own cell) until the
+        // time limit of 4 steps.
+        for t in 0..4 {
+            let step = book_step(&mut book, &mut sampler, first);
+            assert_eq!(step.goal_done, t == 3);
+            assert!(!step.success);
+        }
+        (start, first, std::mem::take(&mut book.finished))
+    }
+
+    #[test]
+    fn a_chain_is_recorded_up_to_its_last_reached_goal() {
+        let (start, first, recorded) = chain_with_a_missed_leg(false);
+        assert_eq!(recorded.len(), 1);
+        let cells: Vec<u32> = recorded[0].states.iter().map(|s| s.cell).collect();
+        assert_eq!(cells, vec![start, first]);
+        assert_eq!(recorded[0].actions, vec![sim::action::FORWARD]);
+
+        // With the missed legs kept, the four steps towards the second goal
+        // are part of it.
+        let (_, _, recorded) = chain_with_a_missed_leg(true);
+        assert_eq!(recorded.len(), 1);
+        assert_eq!(recorded[0].actions.len(), 5);
+        assert_eq!(recorded[0].states.len(), 6);
+    }
+
+    #[test]
+    fn a_chain_that_reaches_no_goal_is_not_recorded() {
+        let layout = room();
+        let mut sampler = GoalSampler::new(&layout, 8);
+        let mut book = GoalBook {
+            record_missed_legs: false,
+            ..GoalBook::new(3, 2, true)
+        };
+        let start = 2 * layout.width as u32 + 2;
+        with_obs(start, |obs| book.sync(&mut sampler, obs));
+        assert!(!book_step(&mut book, &mut sampler, start).goal_done);
+        assert!(book_step(&mut book, &mut sampler, start).goal_done);
+        assert!(book.finished.is_empty());
     }
 
     #[test]
