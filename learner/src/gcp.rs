@@ -438,7 +438,8 @@ impl GoalBook {
             episodes: Vec::new(),
             finished: Vec::new(),
             record,
-            record_missed_legs: false,
+            // `GcpConfig::record_missed_legs`'s default: whole chains.
+            record_missed_legs: true,
         }
     }
 
