@@ -1,5 +1,5 @@
 //! The doorway experiment of `tests/pivotal_doorways.rs` over five seeds and
-//! both kinds of data, printed (ranks, coverage against chance, the maps):
+//! four kinds of data, printed (ranks, coverage against chance, the maps):
 //! `cargo bench -p learner --bench doorways_sweep`, a few minutes. It
 //! asserts nothing; the tests assert on seed 1.
 

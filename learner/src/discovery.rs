@@ -38,6 +38,7 @@ use crate::batch_env::{BatchEnvironment, EnvError};
 use crate::checkpoint;
 use crate::edge_refinement::{RefinementStats, refine_with_gcp};
 use crate::error::LearnerError;
+use crate::experience::{ChainShape, Experience};
 use crate::gcp::{GcpConfig, GcpStats, GoalConditionedPolicy};
 use crate::vae::{AgentPose, LatentConfig, LatentTrainer, Trajectory, TrajectoryBatch};
 
@@ -99,6 +100,10 @@ pub struct DiscoveryConfig {
     /// doorways explain (section 3.1, `learner/tests/pivotal_doorways.rs`).
     /// Off by default.
     pub shortest_known_paths: bool,
+    /// Goal chains along the agent's known routes, the goal-directed
+    /// trajectories the latent model finds pivotal states in
+    /// ([`GoalChains`]).
+    pub goal_chains: GoalChains,
     /// The latent model.
     pub latent: LatentConfig,
     /// The goal-conditioned policy.
@@ -130,6 +135,7 @@ impl Default for DiscoveryConfig {
             // pass").
             loop_erase_goal_trajectories: false,
             shortest_known_paths: false,
+            goal_chains: GoalChains::default(),
             latent: LatentConfig::default(),
             gcp: GcpConfig::default(),
         }
@@ -137,6 +143,12 @@ impl Default for DiscoveryConfig {
 }
 
 impl DiscoveryConfig {
+    /// True when the loop books the transitions it observes (the known
+    /// routes are used).
+    pub fn records_experience(&self) -> bool {
+        self.shortest_known_paths || self.goal_chains.per_round > 0
+    }
+
     /// Checks the values once, before anything is built.
     pub fn validate(&self) -> Result<(), LearnerError> {
         let bad = |field: &'static str, reason: &str| {
@@ -161,8 +173,80 @@ impl DiscoveryConfig {
             return bad("latent_batch", "must be at least 1 and at most buffer");
         }
         self.goal_curriculum.validate(self.gcp.goal_walk_len)?;
+        self.goal_chains.validate()?;
         self.latent.validate()?;
         self.gcp.validate()?;
+        Ok(())
+    }
+}
+
+/// Goal chains: trajectories that reach `legs` goals in turn, each along
+/// a shortest route through the transitions the agent has observed, ties
+/// broken at random ([`crate::experience`]). They stand for what a trained
+/// `π_g` does (section 3.2), whose trajectories the latent model learns
+/// from (section 3.1): on this machine's budget `π_g` reaches goals within
+/// one room only, while a trajectory whose legs cross rooms is what the
+/// doorways explain. The chains join the walks and `π_g`'s episodes as a
+/// third source of the training buffer, and `batch_share` of every latent
+/// batch is drawn from them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GoalChains {
+    /// Chains drawn per round (0: none, the loop of the paper's sources
+    /// alone).
+    pub per_round: usize,
+    /// Goals reached in turn by one chain.
+    pub legs: usize,
+    /// Fewest actions from one goal (or the chain's start) to the next
+    /// along the shortest known route.
+    pub min_actions: u32,
+    /// Most actions from one goal to the next.
+    pub max_actions: u32,
+    /// Share of every latent-model batch drawn from the chains; the rest
+    /// is split evenly between the walks and `π_g`'s episodes.
+    pub batch_share: f64,
+}
+
+impl Default for GoalChains {
+    fn default() -> Self {
+        GoalChains {
+            per_round: 512,
+            legs: 1,
+            min_actions: 8,
+            // Beyond the farthest cell of any embedded maze: goals anywhere
+            // at least `min_actions` away.
+            max_actions: 1000,
+            batch_share: 0.75,
+        }
+    }
+}
+
+impl GoalChains {
+    /// The shape of one chain.
+    pub fn shape(&self) -> ChainShape {
+        ChainShape {
+            legs: self.legs,
+            min_actions: self.min_actions,
+            max_actions: self.max_actions,
+        }
+    }
+
+    fn validate(&self) -> Result<(), LearnerError> {
+        let bad = |field: &'static str, reason: &str| {
+            Err(LearnerError::Config(crate::ConfigError::new(field, reason)))
+        };
+        if self.per_round > 0 && self.legs == 0 {
+            return bad("goal_chains.legs", "must be at least 1");
+        }
+        if self.min_actions == 0 || self.max_actions < self.min_actions {
+            return bad(
+                "goal_chains.min_actions",
+                "must be at least 1 and at most goal_chains.max_actions",
+            );
+        }
+        if !(0.0..1.0).contains(&self.batch_share) {
+            return bad("goal_chains.batch_share", "must be in [0, 1)");
+        }
         Ok(())
     }
 }
@@ -265,6 +349,10 @@ pub struct RoundStats {
     /// their last reached goal, loops erased).
     #[serde(default)]
     pub goal_trajectories: usize,
+    /// Goal chains along known routes the round gave the latent model
+    /// ([`GoalChains`]; 0 in histories written before they existed).
+    #[serde(default)]
+    pub goal_chains: usize,
     /// Distinct cells visited so far.
     pub cells_visited: usize,
     /// Size of `V_p` after the round.
@@ -304,11 +392,13 @@ struct State {
     /// (read as `gcp.goal_walk_len`).
     #[serde(default)]
     goal_distance: usize,
-    /// Every transition observed so far: [`transition_key`] of (pose,
-    /// action) → the pose it led to as `(cell, direction, carried)`
-    /// ([`DiscoveryConfig::shortest_known_paths`]).
+    /// Every transition observed so far, when the known routes are used
+    /// ([`DiscoveryConfig::shortest_known_paths`], [`GoalChains`]).
     #[serde(default)]
-    experience: BTreeMap<u64, (u32, u8, u8)>,
+    experience: Experience,
+    /// The goal chains' third of the training buffer.
+    #[serde(default)]
+    chain_buffer: Vec<SavedTrajectory>,
 }
 
 /// The discovery loop's models and bookkeeping.
@@ -321,6 +411,8 @@ pub struct Discovery {
     buffer: Vec<Trajectory>,
     /// Training trajectories of `π_g` (chained goal episodes).
     gcp_buffer: Vec<Trajectory>,
+    /// Training trajectories along known routes ([`GoalChains`]).
+    chain_buffer: Vec<Trajectory>,
 }
 
 impl std::fmt::Debug for Discovery {
@@ -444,7 +536,8 @@ impl Discovery {
             gcp_buffer: Vec::new(),
             multipliers: None,
             goal_distance,
-            experience: BTreeMap::new(),
+            experience: Experience::default(),
+            chain_buffer: Vec::new(),
         };
         Ok(Discovery {
             layout: layout.clone(),
@@ -453,6 +546,7 @@ impl Discovery {
             gcp,
             buffer: Vec::new(),
             gcp_buffer: Vec::new(),
+            chain_buffer: Vec::new(),
         })
     }
 
@@ -524,45 +618,31 @@ impl Discovery {
         self.latent.model().prior_mean(&cells)
     }
 
+    /// This round's goal chains ([`GoalChains`]), drawn from the
+    /// experience with an RNG of their own seeded from `(seed, round)`.
+    fn goal_chains(&self, round: u32) -> Vec<Trajectory> {
+        let c = &self.state.config.goal_chains;
+        if c.per_round == 0 {
+            return Vec::new();
+        }
+        let seed = sim::env_seed(self.state.config.seed, 0x200_0000 + u64::from(round));
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let routes = self.state.experience.routes();
+        (0..c.per_round)
+            .filter_map(|_| routes.chain(c.shape(), &mut rng))
+            .collect()
+    }
+
     /// Replaces each recorded path by the shortest action sequence from
     /// `start` through the observed transitions, where that is shorter
     /// ([`DiscoveryConfig::shortest_known_paths`]). Breadth-first over
     /// poses, actions in ascending order, so the result is a function of
     /// the experience alone.
     fn shorten_paths(&mut self, start: AgentPose) {
-        let experience = &self.state.experience;
-        let mut parent: std::collections::HashMap<AgentPose, (AgentPose, u8)> =
-            std::collections::HashMap::new();
-        let mut seen = std::collections::HashSet::from([start]);
-        let mut queue = std::collections::VecDeque::from([start]);
-        let mut reached_cells = std::collections::HashSet::from([start.cell]);
-        while let Some(p) = queue.pop_front() {
-            let from = transition_key(p, 0);
-            for (&key, &(cell, direction, carried)) in experience.range(from..from + 256) {
-                let q = AgentPose {
-                    cell,
-                    direction,
-                    carried,
-                };
-                if !seen.insert(q) {
-                    continue;
-                }
-                parent.insert(q, (p, (key & 0xff) as u8));
-                queue.push_back(q);
-                if reached_cells.insert(q.cell) {
-                    // The first pose of a cell reached is one of its nearest.
-                    let mut path = Vec::new();
-                    let mut at = q;
-                    while let Some(&(before, a)) = parent.get(&at) {
-                        path.push(a);
-                        at = before;
-                    }
-                    path.reverse();
-                    let known = self.state.paths.get(&q.cell).map_or(usize::MAX, Vec::len);
-                    if path.len() < known {
-                        self.state.paths.insert(q.cell, path);
-                    }
-                }
+        for (cell, path) in self.state.experience.shortest_paths_from(start) {
+            let known = self.state.paths.get(&cell).map_or(usize::MAX, Vec::len);
+            if path.len() < known {
+                self.state.paths.insert(cell, path);
             }
         }
     }
@@ -620,9 +700,9 @@ impl Discovery {
                         None => w.route.reset(pose),
                         Some(a) => {
                             if let Some(&before) = w.route.poses.last()
-                                && cfg.shortest_known_paths
+                                && cfg.records_experience()
                             {
-                                observe(&mut self.state.experience, before, a, pose);
+                                self.state.experience.observe(before, a, pose);
                             }
                             w.route.push(a, pose);
                         }
@@ -741,10 +821,8 @@ impl Discovery {
             for s in &t.states {
                 *self.state.visits.entry(s.cell).or_default() += 1;
             }
-            if cfg.shortest_known_paths {
-                for (k, &a) in t.actions.iter().enumerate() {
-                    observe(&mut self.state.experience, t.states[k], a, t.states[k + 1]);
-                }
+            if cfg.records_experience() {
+                self.state.experience.observe_trajectory(t);
             }
         }
         let goal_trajectories: Vec<Trajectory> = if cfg.loop_erase_goal_trajectories {
@@ -757,20 +835,31 @@ impl Discovery {
             goal_trajectories
         };
         let goal_count = goal_trajectories.len();
-        let collected = walks.len() + goal_count;
+        // Goal chains along the routes the agent knows now.
+        let chains = self.goal_chains(round);
+        let chain_count = chains.len();
+        let collected = walks.len() + goal_count + chain_count;
 
-        // 2. The latent model, on the newest `buffer` trajectories of both
+        // 2. The latent model, on the newest `buffer` trajectories of the
         // sources. A share of this round's trajectories of each source is
         // held out for the accuracy, and joins the buffer afterwards.
         let (walk_eval, walk_train) = hold_out(walks, EVAL_PER_SOURCE);
         let (goal_eval, goal_train) = hold_out(goal_trajectories, EVAL_PER_SOURCE);
+        let (chain_eval, chain_train) = hold_out(chains, EVAL_PER_SOURCE);
         let half = cfg.buffer.div_ceil(2);
         push_newest(&mut self.buffer, walk_train, half);
         push_newest(&mut self.gcp_buffer, goal_train, half);
+        push_newest(&mut self.chain_buffer, chain_train, half);
         let mut last = None;
-        if !(self.buffer.is_empty() && self.gcp_buffer.is_empty()) {
+        let rest = (1.0 - cfg.goal_chains.batch_share) / 2.0;
+        if !(self.buffer.is_empty() && self.gcp_buffer.is_empty() && self.chain_buffer.is_empty()) {
             for _ in 0..cfg.latent_steps_per_round {
-                let batch = mixed_batch(&self.buffer, &self.gcp_buffer, cfg.latent_batch, &mut rng);
+                let sources = [
+                    (self.buffer.as_slice(), rest),
+                    (self.gcp_buffer.as_slice(), rest),
+                    (self.chain_buffer.as_slice(), cfg.goal_chains.batch_share),
+                ];
+                let batch = mixed_batch(&sources, cfg.latent_batch, &mut rng);
                 let tb = TrajectoryBatch::new(
                     &batch,
                     &self.latent.model().config().clone(),
@@ -779,7 +868,7 @@ impl Discovery {
                 last = Some(self.latent.train_step(&tb));
             }
         }
-        let eval_set = mixed_eval(&walk_eval, &goal_eval);
+        let eval_set = mixed_eval(&[&walk_eval, &goal_eval, &chain_eval]);
         let eval = if eval_set.is_empty() {
             None
         } else {
@@ -793,6 +882,7 @@ impl Discovery {
         let accuracy = eval.as_ref().map_or(0.0, |e| e.reconstruction_accuracy);
         push_newest(&mut self.buffer, walk_eval, half);
         push_newest(&mut self.gcp_buffer, goal_eval, half);
+        push_newest(&mut self.chain_buffer, chain_eval, half);
 
         // 3. V_p: the top `pivotal_ratio` of the visited cells by prior mean.
         let visited: Vec<u32> = self.state.visits.keys().copied().collect();
@@ -828,6 +918,7 @@ impl Discovery {
             gcp_curiosity: mean(|s| s.mean_curiosity),
             goal_distance,
             goal_trajectories: goal_count,
+            goal_chains: chain_count,
             cells_visited: self.state.visits.len(),
             pivotal_states: self.state.pivotal.len(),
             seconds: t0.elapsed().as_secs_f64(),
@@ -848,10 +939,12 @@ impl Discovery {
         let gcp = checkpoint::var_store_bytes(self.gcp.var_store())?;
         self.state.buffer = self.buffer.iter().map(saved).collect();
         self.state.gcp_buffer = self.gcp_buffer.iter().map(saved).collect();
+        self.state.chain_buffer = self.chain_buffer.iter().map(saved).collect();
         self.state.multipliers = Some(*self.latent.model().multipliers());
         let json = serde_json::to_vec(&self.state).map_err(|e| ckpt(dir, e));
         self.state.buffer.clear();
         self.state.gcp_buffer.clear();
+        self.state.chain_buffer.clear();
         checkpoint::commit(
             dir,
             &[
@@ -896,10 +989,12 @@ impl Discovery {
         }
         self.buffer = state.buffer.iter().map(restored).collect();
         self.gcp_buffer = state.gcp_buffer.iter().map(restored).collect();
+        self.chain_buffer = state.chain_buffer.iter().map(restored).collect();
         self.state = State {
             buffer: Vec::new(),
             config: self.state.config.clone(),
             gcp_buffer: Vec::new(),
+            chain_buffer: Vec::new(),
             ..state
         };
         Ok(true)
@@ -941,29 +1036,6 @@ impl Discovery {
     ) -> Result<RefinementStats, LearnerError> {
         refine_with_gcp(graph, &mut self.gcp)
     }
-}
-
-/// The key of (pose, action) in the observed transitions: the pose's cell,
-/// direction and carried object, then the action, one per byte but the cell.
-fn transition_key(pose: AgentPose, action: u8) -> u64 {
-    (u64::from(pose.cell) << 24)
-        | (u64::from(pose.direction) << 16)
-        | (u64::from(pose.carried) << 8)
-        | u64::from(action)
-}
-
-/// Books that `action` took the agent from `before` to `after`.
-fn observe(
-    experience: &mut BTreeMap<u64, (u32, u8, u8)>,
-    before: AgentPose,
-    action: u8,
-    after: AgentPose,
-) {
-    experience.entry(transition_key(before, action)).or_insert((
-        after.cell,
-        after.direction,
-        after.carried,
-    ));
 }
 
 /// `t` with its loops erased ([`LoopErasedRoute`]): same first and last
@@ -1021,36 +1093,54 @@ fn push_newest(buffer: &mut Vec<Trajectory>, fresh: Vec<Trajectory>, cap: usize)
     }
 }
 
-/// `size` trajectories drawn uniformly, half from each source (all from
-/// one when the other is empty). At least one source must hold one.
+/// `size` trajectories, each source's share (renormalised over the sources
+/// that hold any) drawn uniformly from it. The sources take turns by
+/// largest shortfall, ties to the first, so two equal shares alternate.
+/// At least one source must hold a trajectory.
 fn mixed_batch(
-    walks: &[Trajectory],
-    goals: &[Trajectory],
+    sources: &[(&[Trajectory], f64)],
     size: usize,
     rng: &mut SmallRng,
 ) -> Vec<Trajectory> {
+    let total: f64 = sources
+        .iter()
+        .filter(|(s, _)| !s.is_empty())
+        .map(|&(_, w)| w)
+        .sum();
+    let share = |(s, w): &(&[Trajectory], f64)| if s.is_empty() { 0.0 } else { w / total };
+    let mut drawn = vec![0usize; sources.len()];
     (0..size)
         .map(|k| {
-            let from = match (walks.is_empty(), goals.is_empty()) {
-                (false, true) => walks,
-                (true, false) => goals,
-                _ if k.is_multiple_of(2) => walks,
-                _ => goals,
-            };
+            let mut pick = None;
+            let mut most = f64::NEG_INFINITY;
+            for (i, src) in sources.iter().enumerate() {
+                let shortfall = share(src) * (k + 1) as f64 - drawn[i] as f64;
+                if !src.0.is_empty() && share(src) > 0.0 && shortfall > most {
+                    (pick, most) = (Some(i), shortfall);
+                }
+            }
+            let i = pick.expect("invariant: some source holds a trajectory");
+            drawn[i] += 1;
+            let from = sources[i].0;
             from[rng.random_range(0..from.len())].clone()
         })
         .collect()
 }
 
 /// The held-out trajectories in the training mix: as many of each source
-/// (the smaller count), or all of one when the other has none.
-fn mixed_eval(walks: &[Trajectory], goals: &[Trajectory]) -> Vec<Trajectory> {
-    let n = match (walks.len(), goals.len()) {
-        (0, g) => return goals[..g].to_vec(),
-        (w, 0) => return walks[..w].to_vec(),
-        (w, g) => w.min(g),
-    };
-    walks[..n].iter().chain(&goals[..n]).cloned().collect()
+/// that has any (the smallest count).
+fn mixed_eval(sources: &[&[Trajectory]]) -> Vec<Trajectory> {
+    let n = sources
+        .iter()
+        .map(|s| s.len())
+        .filter(|&n| n > 0)
+        .min()
+        .unwrap_or(0);
+    sources
+        .iter()
+        .flat_map(|s| s.iter().take(n))
+        .cloned()
+        .collect()
 }
 
 fn saved(t: &Trajectory) -> SavedTrajectory {
@@ -1160,37 +1250,25 @@ mod tests {
         use sim::action::{FORWARD, LEFT, RIGHT};
         let layout = Layout::parse("room", "#####\n#>..#\n#..E#\n#####\n").expect("layout");
         let mut d = Discovery::new(DiscoveryConfig::default(), &layout, 1, 3).expect("discovery");
-        // Cells 6, 7, 8 along the top row, 11, 12, 13 below (13 the exit,
-        // which the search treats as any cell); the agent starts on 6
-        // facing right (direction 0).
+        // Cells 6, 7, 8 along the top row, 11, 12, 13 below; the agent
+        // starts on 6 facing right. The top row, and a detour below.
         let e = &mut d.state.experience;
-        observe(e, pose(6, 0), FORWARD, pose(7, 0));
-        observe(e, pose(7, 0), FORWARD, pose(8, 0));
-        observe(e, pose(8, 0), RIGHT, pose(8, 1));
-        observe(e, pose(8, 1), FORWARD, pose(13, 1));
-        // A detour the walk took: down first, then along the bottom row.
-        observe(e, pose(6, 0), RIGHT, pose(6, 1));
-        observe(e, pose(6, 1), FORWARD, pose(11, 1));
-        observe(e, pose(11, 1), LEFT, pose(11, 0));
-        observe(e, pose(11, 0), FORWARD, pose(12, 0));
-        // Seen, but never from a pose the agent can reach from the start.
-        observe(e, pose(12, 2), FORWARD, pose(11, 2));
+        e.observe(pose(6, 0), FORWARD, pose(7, 0));
+        e.observe(pose(7, 0), FORWARD, pose(8, 0));
+        e.observe(pose(8, 0), RIGHT, pose(8, 1));
+        e.observe(pose(8, 1), FORWARD, pose(13, 1));
+        e.observe(pose(6, 0), RIGHT, pose(6, 1));
+        e.observe(pose(6, 1), FORWARD, pose(11, 1));
         let walked = vec![FORWARD, LEFT, RIGHT, FORWARD, RIGHT, RIGHT, LEFT, FORWARD];
         d.state.paths.insert(13, walked);
-        d.state.paths.insert(12, vec![FORWARD; 9]);
+        d.state.paths.insert(11, vec![FORWARD; 9]);
+        d.state.paths.insert(7, vec![FORWARD]);
         d.shorten_paths(pose(6, 0));
         assert_eq!(d.state.paths[&13], vec![FORWARD, FORWARD, RIGHT, FORWARD]);
-        assert_eq!(d.state.paths[&12], vec![RIGHT, FORWARD, LEFT, FORWARD]);
-        assert_eq!(d.state.paths[&8], vec![FORWARD, FORWARD]);
         assert_eq!(d.state.paths[&11], vec![RIGHT, FORWARD]);
-        assert!(
-            !d.state.paths.contains_key(&6),
-            "no path to the start's own cell"
-        );
-        // A shorter recorded path is kept.
-        d.state.paths.insert(13, vec![FORWARD]);
-        d.shorten_paths(pose(6, 0));
-        assert_eq!(d.state.paths[&13], vec![FORWARD]);
+        assert_eq!(d.state.paths[&8], vec![FORWARD, FORWARD]);
+        // A recorded path as short as the known one is kept.
+        assert_eq!(d.state.paths[&7], vec![FORWARD]);
     }
 
     #[test]

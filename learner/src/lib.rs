@@ -16,6 +16,7 @@ pub mod checkpoint;
 pub mod discovery;
 pub mod edge_refinement;
 pub mod error;
+pub mod experience;
 pub mod gcp;
 pub mod hrl;
 pub mod policy;

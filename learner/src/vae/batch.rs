@@ -125,7 +125,12 @@ impl TrajectoryBatch {
             for (t, pose) in tau.states.iter().enumerate() {
                 let i = t * batch + b;
                 cells[i] = i64::from(pose.cell);
-                directions[i] = i64::from(pose.direction);
+                // One direction: the model does not see the facing.
+                directions[i] = if cfg.num_directions == 1 {
+                    0
+                } else {
+                    i64::from(pose.direction)
+                };
                 carried[i] = i64::from(pose.carried);
                 state_mask[i] = 1.0;
                 reverse_index[i] = (len - 1 - t) as i64;
@@ -207,7 +212,11 @@ fn check_trajectory(
     for pose in &tau.states {
         let checks = [
             out_of_range("cell", i64::from(pose.cell), cfg.num_cells),
-            out_of_range("direction", i64::from(pose.direction), cfg.num_directions),
+            out_of_range(
+                "direction",
+                i64::from(pose.direction) * i64::from(cfg.num_directions > 1),
+                cfg.num_directions,
+            ),
             out_of_range("carried", i64::from(pose.carried), cfg.num_carried),
         ];
         if let Some(err) = checks.into_iter().flatten().next() {
@@ -267,6 +276,36 @@ mod tests {
             .squeeze_dim(-1);
         assert_eq!(column(&reversed, 0), vec![4.0, 3.0, 2.0, 1.0]);
         assert_eq!(column(&reversed, 1), vec![8.0, 7.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn one_direction_reads_every_facing_as_one_and_four_keep_them() {
+        let facing = |d: u8| AgentPose {
+            cell: 1,
+            direction: d,
+            carried: 0,
+        };
+        let tau = Trajectory {
+            states: vec![facing(0), facing(1), facing(3)],
+            actions: vec![1, 1],
+        };
+        let directions = |num_directions| {
+            let cfg = LatentConfig {
+                num_directions,
+                ..cfg()
+            };
+            let batch = TrajectoryBatch::new(std::slice::from_ref(&tau), &cfg, Device::Cpu)
+                .expect("valid batch");
+            Vec::<i64>::try_from(batch.directions.select(1, 0)).expect("1-d")
+        };
+        assert_eq!(directions(1), vec![0, 0, 0]);
+        assert_eq!(directions(4), vec![0, 1, 3]);
+        // Two facings are one too many for a model of two.
+        let two = LatentConfig {
+            num_directions: 2,
+            ..cfg()
+        };
+        assert!(TrajectoryBatch::new(&[tau], &two, Device::Cpu).is_err());
     }
 
     #[test]

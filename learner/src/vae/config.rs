@@ -15,7 +15,15 @@ pub struct LatentConfig {
     // ---- state and action spaces (taken from the maze) ----
     /// Number of grid cells `W·H` (rows of the cell embedding).
     pub num_cells: i64,
-    /// Number of agent directions (MiniGrid: 4).
+    /// Facings the model tells apart in a state: 1 (the default) reads
+    /// every facing as one, so a state is the agent's cell and carried
+    /// object; 4 (MiniGrid's directions) adds the facing. With the facing
+    /// the decoder reads every turn off the change of facing between two
+    /// kept states, so the states that explain a route are the points
+    /// where it turns, which lie anywhere along the line through a doorway;
+    /// without it, the decoder must place the route from where its kept
+    /// states are, and the doorway pins down most of a route that crosses
+    /// rooms (docs/implementation_details.md, "Pivotal states").
     pub num_directions: i64,
     /// Number of carried-object kinds, 0 meaning "nothing".
     pub num_carried: i64,
@@ -76,14 +84,14 @@ impl Default for LatentConfig {
         Self {
             // A 25×25 grid covers the small and medium mazes.
             num_cells: 25 * 25,
-            num_directions: 4,
+            num_directions: 1,
             num_carried: 8,
             num_actions: 7,
             state_dim: 32,
             action_dim: 8,
             lstm_hidden: 64,
             prior_hidden: 64,
-            kept_per_step: 0.1,
+            kept_per_step: 0.2,
             kl_budget: 1.0,
             l0_tolerance: 0.5,
             transition_tolerance: 1.0,
