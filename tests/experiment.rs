@@ -53,9 +53,14 @@ fn json(p: &Path) -> serde_json::Value {
 fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
+    // The grid pins its discovery settings.
+    std::fs::write(d.join("discover.toml"), "[goal_chains]\nper_round = 64\n").unwrap();
     std::fs::write(
         d.join("grid.toml"),
-        grid("tiny", 3840, "\"a2c\", \"wn-pivotal-trav-init\""),
+        format!(
+            "discover_config = \"discover.toml\"\n{}",
+            grid("tiny", 3840, "\"a2c\", \"wn-pivotal-trav-init\"")
+        ),
     )
     .unwrap();
     let (_, err) = ok(&worldgraph(d, &["experiment", "grid.toml", "--jobs", "2"]));
@@ -129,6 +134,10 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     ));
     assert!(out.contains("reproduced: the same test score"), "{out}");
     assert!(d.join("again/discover/small-seed-0/graph.json").exists());
+    // ... with the settings its grid pins.
+    let resolved =
+        std::fs::read_to_string(d.join("again/discover/small-seed-0/config.toml")).unwrap();
+    assert!(resolved.contains("per_round = 64"), "{resolved}");
     // A summary whose score was changed does not.
     let mut bad = a2c.clone();
     bad["test_score"] = serde_json::json!(a2c["test_score"].as_f64().unwrap() + 0.5);

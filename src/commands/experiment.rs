@@ -48,6 +48,13 @@ pub struct Grid {
     pub test_seeds: usize,
     /// Budgets, one per maze of the grid.
     pub maze: Vec<MazeBudget>,
+    /// The discovery settings of the grid's world graphs: a TOML file of
+    /// `DiscoveryConfig` (`discover --config`), relative to the directory
+    /// the command runs in (the repository). `None`: the current defaults.
+    /// A summary names its grid, so reproducing it reads this too: pinning
+    /// it keeps committed results reproducible when the defaults move on.
+    #[serde(default)]
+    pub discover_config: Option<PathBuf>,
     /// Cells: tasks × configurations (× the grid's mazes and seeds).
     pub group: Vec<Group>,
 }
@@ -246,6 +253,13 @@ impl Grid {
             "validation_seeds and test_seeds must be at least 1"
         );
         anyhow::ensure!(!self.maze.is_empty(), "[[maze]]: at least one maze");
+        if let Some(c) = &self.discover_config {
+            anyhow::ensure!(
+                c.is_file(),
+                "discover_config: {} is not a file (paths are relative to the directory the command runs in)",
+                c.display()
+            );
+        }
         for (i, m) in self.maze.iter().enumerate() {
             anyhow::ensure!(
                 m.env_steps > 0 && m.eval_every > 0 && m.discover_rounds > 0,
@@ -334,6 +348,10 @@ pub struct ExperimentArgs {
     /// List the runs and what is left, and exit.
     #[arg(long)]
     pub dry_run: bool,
+    /// Only the world graph discoveries the selected runs need, no
+    /// training: each summary goes to `<results>/<maze>/discover/`.
+    #[arg(long)]
+    pub discoveries_only: bool,
     /// Rerun the run a summary records (discovery included) in a scratch
     /// directory and check that it gives the same test score; exits
     /// non-zero if not.
@@ -416,6 +434,9 @@ fn discover_command(plan: &Plan, spec: &DiscoverSpec) -> anyhow::Result<Command>
         .arg("--run")
         .arg(plan.discover_dir(spec))
         .arg("--json");
+    if let Some(config) = &plan.grid.discover_config {
+        cmd.arg("--config").arg(config);
+    }
     Ok(cmd)
 }
 
@@ -653,7 +674,9 @@ fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
             }
         }
     }
-    out.extend(train);
+    if !a.discoveries_only {
+        out.extend(train);
+    }
     Ok(out)
 }
 
@@ -742,9 +765,11 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
             }
         };
     }
-    // A discovery is needed only by training runs still to do.
+    // A discovery is needed only by training runs still to do (or for
+    // itself, with --discoveries-only).
     let needed: Vec<bool> = (0..all.len())
         .map(|i| match &all[i] {
+            Job::Discover { .. } if a.discoveries_only => true,
             Job::Discover { .. } => all.iter().enumerate().any(|(k, j)| {
                 matches!(j, Job::Train { needs: Some(n), .. } if *n == i) && !finished[k]
             }),
@@ -991,6 +1016,21 @@ fn reproduce(summary: &Path, a: &ExperimentArgs) -> anyhow::Result<std::process:
             eval_every: r.train_config.eval_every,
             discover_rounds: r.discover.as_ref().map_or(1, |d| d.rounds),
         }],
+        // The discovery settings the summary's grid pins, if it does.
+        discover_config: match &r.discover {
+            Some(_) => {
+                Grid::read(Path::new(&r.grid))
+                    .with_context(|| {
+                        format!(
+                            "{} names grid {}, whose discover_config the world graph needs",
+                            summary.display(),
+                            r.grid
+                        )
+                    })?
+                    .discover_config
+            }
+            None => None,
+        },
         group: Vec::new(),
     };
     let plan = Plan {
