@@ -108,6 +108,22 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         before
     );
 
+    // A discovery that finished without its summary (the grid stopped in
+    // between) is recorded on the next start, and --discoveries-only runs
+    // no training.
+    let disc_path = d.join("results/small/discover/seed-0.json");
+    let recorded = std::fs::read(&disc_path).unwrap();
+    std::fs::remove_file(&disc_path).unwrap();
+    let (_, err) = ok(&worldgraph(
+        d,
+        &["experiment", "grid.toml", "--discoveries-only"],
+    ));
+    assert!(
+        err.contains("0 training runs") && err.contains("recorded discover small seed 0"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&disc_path).unwrap(), recorded);
+
     // The same results under another budget are refused, not counted.
     std::fs::write(
         d.join("longer.toml"),

@@ -809,6 +809,17 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         return Ok(std::process::ExitCode::SUCCESS);
     }
+    // A discovery that finished after its grid was stopped, before its
+    // summary was written: written now.
+    for (i, j) in all.iter().enumerate() {
+        if let Job::Discover { spec } = j
+            && finished[i]
+            && !discover_path(&plan.results, &spec.maze, spec.seed).exists()
+        {
+            record(&plan, j)?;
+            eprintln!("recorded {} (it had finished)", Plan::label(j));
+        }
+    }
 
     let stop = stop_flag()?;
     let bar = crate::progress::bar(queue.len() as u64, "experiment");
