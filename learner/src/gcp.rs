@@ -116,7 +116,7 @@ impl Default for GcpConfig {
             step_penalty: -0.01,
             curiosity_coef: 0.004,
             // Recording only up to the last reached goal did not make `V_p`
-            // better (docs/implementation_details.md, "Second pass").
+            // better (docs/implementation_details.md, "Earlier passes").
             record_missed_legs: true,
             conv_channels: [16, 32],
             hidden: 64,
