@@ -1213,14 +1213,7 @@ pub fn config_difference(saved: &DiscoveryConfig, now: &DiscoveryConfig) -> Opti
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn pose(cell: u32, direction: u8) -> AgentPose {
-        AgentPose {
-            cell,
-            direction,
-            carried: 0,
-        }
-    }
+    use crate::experience::test_support::{pose, walked};
 
     #[test]
     fn loop_erasure_keeps_the_ends_and_drops_the_detours() {
@@ -1250,15 +1243,8 @@ mod tests {
         use sim::action::{FORWARD, LEFT, RIGHT};
         let layout = Layout::parse("room", "#####\n#>..#\n#..E#\n#####\n").expect("layout");
         let mut d = Discovery::new(DiscoveryConfig::default(), &layout, 1, 3).expect("discovery");
-        // Cells 6, 7, 8 along the top row, 11, 12, 13 below; the agent
-        // starts on 6 facing right. The top row, and a detour below.
-        let e = &mut d.state.experience;
-        e.observe(pose(6, 0), FORWARD, pose(7, 0));
-        e.observe(pose(7, 0), FORWARD, pose(8, 0));
-        e.observe(pose(8, 0), RIGHT, pose(8, 1));
-        e.observe(pose(8, 1), FORWARD, pose(13, 1));
-        e.observe(pose(6, 0), RIGHT, pose(6, 1));
-        e.observe(pose(6, 1), FORWARD, pose(11, 1));
+        // The room of `walked`: the top row, and a detour below.
+        d.state.experience = walked();
         let walked = vec![FORWARD, LEFT, RIGHT, FORWARD, RIGHT, RIGHT, LEFT, FORWARD];
         d.state.paths.insert(13, walked);
         d.state.paths.insert(11, vec![FORWARD; 9]);

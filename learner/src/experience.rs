@@ -278,13 +278,14 @@ impl KnownRoutes {
     }
 }
 
+/// Fixtures shared by the tests of the modules that use [`Experience`].
 #[cfg(test)]
-mod tests {
+pub(crate) mod test_support {
     use super::*;
-    use rand::SeedableRng;
     use sim::action::{FORWARD, LEFT, RIGHT};
 
-    fn pose(cell: u32, direction: u8) -> AgentPose {
+    /// A pose carrying nothing.
+    pub(crate) fn pose(cell: u32, direction: u8) -> AgentPose {
         AgentPose {
             cell,
             direction,
@@ -294,7 +295,7 @@ mod tests {
 
     /// The 3×2 room of `#####/#>..#/#..E#/#####`: cells 6, 7, 8 on top,
     /// 11, 12, 13 below, with a walk's transitions.
-    fn walked() -> Experience {
+    pub(crate) fn walked() -> Experience {
         let mut e = Experience::default();
         e.observe(pose(6, 0), FORWARD, pose(7, 0));
         e.observe(pose(7, 0), FORWARD, pose(8, 0));
@@ -311,6 +312,14 @@ mod tests {
         e.observe(pose(8, 0), FORWARD, pose(8, 0));
         e
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_support::{pose, walked};
+    use super::*;
+    use rand::SeedableRng;
+    use sim::action::{FORWARD, LEFT, RIGHT};
 
     #[test]
     fn shortest_known_paths_follow_observed_transitions_only() {
