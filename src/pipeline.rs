@@ -17,6 +17,23 @@ use nix::unistd::Pid;
 
 use crate::world::WorldArgs;
 
+/// A command that runs this very executable. When a rebuild has replaced
+/// its file since this process started (the path `current_exe` returns is
+/// gone), Linux's `/proc/self/exe` still names the running image, so the
+/// children run the same build as their parent; `argv[0]` stays
+/// `worldgraph`, which their usage messages print.
+pub fn worldgraph_command() -> anyhow::Result<Command> {
+    let exe = std::env::current_exe().context("cannot find the worldgraph executable")?;
+    let running = Path::new("/proc/self/exe");
+    if !exe.exists() && running.exists() {
+        use std::os::unix::process::CommandExt;
+        let mut cmd = Command::new(running);
+        cmd.arg0("worldgraph");
+        return Ok(cmd);
+    }
+    Ok(Command::new(exe))
+}
+
 /// One of the three processes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -75,7 +92,6 @@ struct Slot {
 
 /// The running role processes of one run.
 pub struct Pipeline {
-    exe: PathBuf,
     log_dir: Option<PathBuf>,
     slots: Vec<Slot>,
 }
@@ -88,7 +104,6 @@ impl Pipeline {
         roles: Vec<(Role, Vec<String>)>,
         log_dir: Option<&Path>,
     ) -> anyhow::Result<Pipeline> {
-        let exe = std::env::current_exe().context("cannot find the worldgraph executable")?;
         let slots = roles
             .into_iter()
             .map(|(role, args)| Slot {
@@ -100,7 +115,6 @@ impl Pipeline {
             })
             .collect();
         Ok(Pipeline {
-            exe,
             log_dir: log_dir.map(Path::to_path_buf),
             slots,
         })
@@ -115,10 +129,9 @@ impl Pipeline {
 
     /// Starts (or restarts) `role`.
     pub fn spawn(&mut self, role: Role) -> anyhow::Result<()> {
-        let exe = self.exe.clone();
         let log_dir = self.log_dir.clone();
         let slot = self.slot(role);
-        let mut cmd = Command::new(&exe);
+        let mut cmd = worldgraph_command()?;
         cmd.args(&slot.args)
             .stdin(Stdio::null())
             .stdout(Stdio::null());

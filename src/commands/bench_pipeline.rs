@@ -25,7 +25,7 @@
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use clap::Args;
@@ -469,13 +469,12 @@ fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
     let cpe = layout.width * layout.height;
     let frame = 8 + a.envs * (std::mem::size_of::<EnvMeta>() + cpe);
     let dir = tempfile::tempdir()?;
-    let exe = std::env::current_exe()?;
     let mut peers = Vec::new();
     let mut streams = Vec::new();
     for role in ["learner", "planner"] {
         let path: PathBuf = dir.path().join(format!("{role}.sock"));
         let listener = UnixListener::bind(&path)?;
-        let child = Command::new(&exe)
+        let child = crate::pipeline::worldgraph_command()?
             .args([
                 "bench",
                 "socket-peer",

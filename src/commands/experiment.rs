@@ -420,13 +420,8 @@ impl Plan {
     }
 }
 
-/// The exe of this process (children run the same build).
-fn exe() -> anyhow::Result<PathBuf> {
-    std::env::current_exe().context("cannot find the worldgraph executable")
-}
-
 fn discover_command(plan: &Plan, spec: &DiscoverSpec) -> anyhow::Result<Command> {
-    let mut cmd = Command::new(exe()?);
+    let mut cmd = crate::pipeline::worldgraph_command()?;
     cmd.args(["discover", "--maze", &spec.maze, "--seed"])
         .arg(spec.seed.to_string())
         .arg("--rounds")
@@ -453,7 +448,7 @@ fn train_command(
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let cfg_file = dir.join("grid-config.toml");
     write_atomic(&cfg_file, toml::to_string(cfg)?.as_bytes())?;
-    let mut cmd = Command::new(exe()?);
+    let mut cmd = crate::pipeline::worldgraph_command()?;
     cmd.args(["train", "--maze", maze.name(), "--task", task.name()])
         .args(ConfigName::parse(config)?.train_args())
         .arg("--seed")
