@@ -1115,7 +1115,7 @@ fn mixed_batch(
             let mut most = f64::NEG_INFINITY;
             for (i, src) in sources.iter().enumerate() {
                 let shortfall = share(src) * (k + 1) as f64 - drawn[i] as f64;
-                if !src.0.is_empty() && share(src) > 0.0 && shortfall > most {
+                if share(src) > 0.0 && shortfall > most {
                     (pick, most) = (Some(i), shortfall);
                 }
             }

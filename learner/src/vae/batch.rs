@@ -125,12 +125,7 @@ impl TrajectoryBatch {
             for (t, pose) in tau.states.iter().enumerate() {
                 let i = t * batch + b;
                 cells[i] = i64::from(pose.cell);
-                // One direction: the model does not see the facing.
-                directions[i] = if cfg.num_directions == 1 {
-                    0
-                } else {
-                    i64::from(pose.direction)
-                };
+                directions[i] = cfg.facing_index(pose.direction);
                 carried[i] = i64::from(pose.carried);
                 state_mask[i] = 1.0;
                 reverse_index[i] = (len - 1 - t) as i64;
@@ -214,7 +209,7 @@ fn check_trajectory(
             out_of_range("cell", i64::from(pose.cell), cfg.num_cells),
             out_of_range(
                 "direction",
-                i64::from(pose.direction) * i64::from(cfg.num_directions > 1),
+                cfg.facing_index(pose.direction),
                 cfg.num_directions,
             ),
             out_of_range("carried", i64::from(pose.carried), cfg.num_carried),

@@ -107,6 +107,17 @@ impl Default for LatentConfig {
 }
 
 impl LatentConfig {
+    /// The row of the direction embedding a facing reads
+    /// ([`Self::num_directions`]): every facing is row 0 for a model of one
+    /// direction, its own row otherwise.
+    pub fn facing_index(&self, direction: u8) -> i64 {
+        if self.num_directions == 1 {
+            0
+        } else {
+            i64::from(direction)
+        }
+    }
+
     /// Checks every field once, before a model is built.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let positive_ints = [

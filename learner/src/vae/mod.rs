@@ -384,20 +384,11 @@ impl LatentModel {
             Tensor::from_slice(&poses.iter().map(f).collect::<Vec<_>>()).to_device(self.device)
         };
         let cells = column(|p| i64::from(p.cell));
-        let one_direction = self.cfg.num_directions == 1;
-        let directions = Tensor::from_slice(
-            &poses
-                .iter()
-                .map(|p| {
-                    if one_direction {
-                        0
-                    } else {
-                        i64::from(p.direction)
-                    }
-                })
-                .collect::<Vec<_>>(),
-        )
-        .to_device(self.device);
+        let facings: Vec<i64> = poses
+            .iter()
+            .map(|p| self.cfg.facing_index(p.direction))
+            .collect();
+        let directions = Tensor::from_slice(&facings).to_device(self.device);
         let carried = column(|p| i64::from(p.carried));
         tch::no_grad(|| {
             let mean = self.prior.forward(&cells, &directions, &carried).mean();
