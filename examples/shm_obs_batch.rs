@@ -27,8 +27,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
         // The simulator: loan a sample, reset the environments into it, send.
         let mut sample = publisher.loan(0, 0)?;
-        let (_, meta, cells) = sample.batch_mut().into_parts();
-        envs.reset(StepOut { cells, meta });
+        let (_, meta, cells, final_cells) = sample.batch_mut().into_parts();
+        envs.reset(StepOut {
+            cells,
+            final_cells,
+            meta,
+        });
         sample.send()?;
 
         // The reader: the received sample is the simulator's memory.

@@ -23,6 +23,11 @@ pub struct ObsView<'a> {
     pub seq: u64,
     /// `N × H × W` cell codes, environment `i` at `i·H·W`.
     pub cells: &'a [u8],
+    /// `N × H × W` final cells: where `meta[i].done()`, the grid
+    /// environment `i`'s finished episode ended on (the observation in
+    /// `cells` is already the next episode's first); stale elsewhere.
+    /// Empty for transports that do not carry it (benchmark stand-ins).
+    pub final_cells: &'a [u8],
     /// `N` step records (reward, flags, agent pose, episode figures).
     pub meta: &'a [EnvMeta],
     /// Grid columns.
@@ -40,6 +45,17 @@ impl ObsView<'_> {
     pub fn env_cells(&self, i: usize) -> &[u8] {
         let n = self.width * self.height;
         &self.cells[i * n..(i + 1) * n]
+    }
+    /// The grid environment `i`'s episode ended on, when this step ended it.
+    pub fn env_final_cells(&self, i: usize) -> &[u8] {
+        let n = self.width * self.height;
+        &self.final_cells[i * n..(i + 1) * n]
+    }
+    /// Row-major cell index where environment `i`'s last action left the
+    /// agent: its finished episode's final cell when the step ended one
+    /// (the observation then shows the next episode's start).
+    pub fn end_cell(&self, i: usize) -> u32 {
+        self.meta[i].end_cell(self.width) as u32
     }
 }
 
@@ -137,6 +153,7 @@ impl BatchEnvironment for InProcess {
         ObsView {
             seq: self.seq,
             cells: &self.buf.cells,
+            final_cells: &self.buf.final_cells,
             meta: &self.buf.meta,
             width: l.width,
             height: l.height,

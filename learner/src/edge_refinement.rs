@@ -174,12 +174,14 @@ fn follow(
             cells: Vec::with_capacity(q.budget),
         });
     }
+    let mut finals = vec![0u8; cells.len()];
     let mut outcome = vec![Outcome::Running; n];
     let mut state = gcp.network().zero_state(n as i64);
     while outcome.contains(&Outcome::Running) {
         let obs = ObsView {
             seq: 0,
             cells: &cells,
+            final_cells: &[],
             meta: &meta,
             width,
             height,
@@ -191,9 +193,14 @@ fn follow(
                 continue;
             }
             let a = actions[i];
-            envs[i].step(a, &mut cells[i * hw..(i + 1) * hw], &mut meta[i]);
+            envs[i].step(
+                a,
+                &mut cells[i * hw..(i + 1) * hw],
+                &mut finals[i * hw..(i + 1) * hw],
+                &mut meta[i],
+            );
             let m = meta[i];
-            let cell = CellIdx(m.y as u32 * width as u32 + m.x as u32);
+            let cell = CellIdx(m.end_cell(width) as u32);
             let path = &mut paths[i];
             path.actions.push(a);
             path.cells.push(cell);

@@ -45,7 +45,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::a2c::input::{CellInput, GoalMarks, mask};
 use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState};
-use crate::a2c::rollout::{GradPath, Rollout, bootstrap_values};
+use crate::a2c::rollout::{GradPath, Rollout, bootstrap_truncated, bootstrap_values};
 use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
 use crate::batch_env::{BatchEnvironment, ObsView};
 use crate::error::{ConfigError, LearnerError};
@@ -149,7 +149,7 @@ impl GcpConfig {
             conv_channels: self.conv_channels,
             hidden: self.hidden,
             num_actions: num_actions as i64,
-            goal_channel: true,
+            goal_planes: 1,
         }
     }
 
@@ -383,6 +383,10 @@ struct GoalStep {
     success: bool,
     /// Length of the goal episode that ended.
     steps: u32,
+    /// The environment's step limit cut the goal episode (no goal reached,
+    /// its own time limit not up): its target bootstraps from the final
+    /// state's value.
+    cut: bool,
 }
 
 /// The goal episodes of a batch of environments.
@@ -516,13 +520,20 @@ impl GoalBook {
             let episode = &mut self.episodes[i];
             episode.steps += 1;
             // After an episode end the observation is the next episode's
-            // first, so the agent's arrival cannot be judged (nor recorded).
-            let success = !env_ended && here.cell == episode.goal;
+            // first; arrival is judged on the cell the action led to (the
+            // finished episode's final cell). An explicit reset took no
+            // action towards the goal.
+            let success = if meta.done() {
+                meta.end_cell(width) as u32 == episode.goal
+            } else {
+                !env_ended && here.cell == episode.goal
+            };
             if !env_ended {
                 episode.trajectory.actions.push(actions[i]);
                 episode.trajectory.states.push(here);
             }
-            let goal_done = success || env_ended || episode.steps >= self.time_limit;
+            let timed_out = episode.steps >= self.time_limit;
+            let goal_done = success || env_ended || timed_out;
             let reward = cfg.step_penalty + if success { cfg.goal_reward } else { 0.0 };
             out.push(GoalStep {
                 reward,
@@ -530,6 +541,7 @@ impl GoalBook {
                 env_ended,
                 success,
                 steps: episode.steps,
+                cut: meta.truncated() && !success && !timed_out,
             });
             if goal_done {
                 let legs = episode.legs + 1;
@@ -658,7 +670,7 @@ impl GoalConditionedPolicy {
                 num_envs,
                 layout.width,
                 layout.height,
-                true,
+                1,
             ),
         })
     }
@@ -666,7 +678,7 @@ impl GoalConditionedPolicy {
     /// Chooses how the update gets its gradients (the benchmark's plain
     /// path is [`GradPath::PerStep`]); the result is the same either way.
     pub fn set_grad_path(&mut self, path: GradPath) {
-        self.rollout = Rollout::new(path, self.num_envs, self.width, self.height, true);
+        self.rollout = Rollout::new(path, self.num_envs, self.width, self.height, 1);
     }
 
     /// Where training time went since the last [`Self::take_times`].
@@ -787,7 +799,7 @@ impl GoalConditionedPolicy {
                 height: obs.height,
             });
         }
-        let mut input = CellInput::new(obs.width, obs.height, true);
+        let mut input = CellInput::new(obs.width, obs.height, 1);
         input.push_obs(obs, Some(GoalMarks::one(goals)));
         let out = tch::no_grad(|| self.net.step(&input, state));
         let actions = self.choose_actions(&out.logits, true);
@@ -851,11 +863,24 @@ impl GoalConditionedPolicy {
             env.step(&chosen)?;
             PhaseTimes::lap(&mut self.rollout.times.step, t0);
             let obs = env.observe();
+            let pursued = self.book.goals();
             let booked = self
                 .book
                 .advance(&mut self.sampler, &obs, &chosen, &self.cfg);
-            let rewards: Vec<f32> = booked.iter().map(|s| s.reward).collect();
+            let mut rewards: Vec<f32> = booked.iter().map(|s| s.reward).collect();
             let goal_done: Vec<bool> = booked.iter().map(|s| s.goal_done).collect();
+            let cut: Vec<usize> = (0..b).filter(|&e| booked[e].cut).collect();
+            if !cut.is_empty() {
+                bootstrap_truncated(
+                    &mut rewards,
+                    &self.net,
+                    &obs,
+                    Some(GoalMarks::one(&pursued)),
+                    &out.state,
+                    &cut,
+                    self.cfg.a2c().gamma,
+                );
+            }
             for s in &booked {
                 env_ended.push(s.env_ended);
                 if s.goal_done {
@@ -1142,6 +1167,7 @@ mod tests {
         f(&ObsView {
             seq: 0,
             cells: &cells,
+            final_cells: &[],
             meta: &meta,
             width: layout.width,
             height: layout.height,

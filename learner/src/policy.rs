@@ -96,7 +96,7 @@ impl Policy for ActorCriticPolicy {
                 .map(|m| f32::from(u8::from(m.done())))
                 .collect();
             let state = self.state.reset_done(&tch::Tensor::from_slice(&done));
-            let mut input = CellInput::new(obs.width, obs.height, false);
+            let mut input = CellInput::new(obs.width, obs.height, 0);
             input.push_obs(obs, None);
             let out = self.net.step(&input, &state);
             let probs = out.logits.softmax(-1, Kind::Float);

@@ -10,3 +10,5 @@ mod pivotal_doorways;
 mod hrl_learns;
 // π_g steering MultiGoal-Stochastic traversals is fine-tuned and checkpointed.
 mod steering;
+// WN: every free cell can be a narrow goal under V_p, V_rand and V_all.
+mod window_coverage;

@@ -17,7 +17,7 @@ pub const NUM_ACTIONS: u8 = 7;
 
 /// Header of an action batch (iceoryx2 user header of `wg/<run>/act`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
-#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.ActHeader.v2"))]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.ActHeader.v3"))]
 #[repr(C)]
 pub struct ActHeader {
     /// [`SCHEMA_VERSION`] of the writer.

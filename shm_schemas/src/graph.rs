@@ -32,7 +32,7 @@ pub const MAX_EDGES: usize = 1 << 20;
 
 /// One directed edge `from → to` of the world graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Pod, Zeroable)]
-#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.GraphEdge.v2"))]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.GraphEdge.v3"))]
 #[repr(C)]
 pub struct GraphEdge {
     /// Source node id.
@@ -45,7 +45,7 @@ pub struct GraphEdge {
 
 /// Header of a graph snapshot (iceoryx2 user header of `wg/<run>/graph`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
-#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.GraphHeader.v2"))]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.GraphHeader.v3"))]
 #[repr(C)]
 pub struct GraphHeader {
     /// [`SCHEMA_VERSION`] of the writer.

@@ -99,7 +99,7 @@ pub use step::{
 
 /// Version of the wire layout. Bumped on any change of a wire type; every
 /// type name ends in `.v<SCHEMA_VERSION>` and every header carries it.
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 
 #[cfg(all(test, feature = "ipc"))]
 mod tests {

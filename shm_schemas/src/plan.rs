@@ -68,7 +68,7 @@ impl RouteStatus {
 /// A route query: from cell `from_cell` facing `from_dir` to pivotal state
 /// `to_pivot`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
-#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.RouteRequest.v2"))]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.RouteRequest.v3"))]
 #[repr(C)]
 pub struct RouteRequest {
     /// Chosen by the client, echoed in the response.
@@ -129,7 +129,7 @@ impl RouteRequest {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("wg.RouteResponse.v2")
+    type_name("wg.RouteResponse.v3")
 )]
 #[repr(C)]
 pub struct RouteResponse {

@@ -6,15 +6,21 @@
 //! ```text
 //! user header  ObsHeader (48 B)            schema version, run, seq, step, send time, N, W, H
 //! payload      [u64] of payload_words()    viewed as bytes:
-//!   [0, 20·N)                               N × EnvMeta            (align 4)
+//!   [0, 28·N)                               N × EnvMeta            (align 4)
 //!   [cells_offset, cells_offset + N·H·W)    N × H × W cell bytes   (env i at i·H·W, row-major)
+//!   [final_offset, final_offset + N·H·W)    N × H × W final cells  (written where the step ended an episode)
 //! ```
+//!
+//! The final cells are the grid a finished episode ended on (see
+//! [`EnvMeta`], "The final state of a finished episode"): environment `i`'s
+//! block is written only on a step whose record has `flags & DONE`, and
+//! holds stale bytes otherwise.
 //!
 //! The payload is an iceoryx2 *slice* of `u64` words (8-byte aligned, so
 //! `EnvMeta` records can be viewed in place) sized exactly for the run's
-//! [`ObsShape`]: a sample of 256 envs on a 13×13 maze takes 47 KiB of
-//! payload, 1024 envs on the 25×19 maze 495 KiB, where a worst-case fixed
-//! array of `MAX_ENVS × MAX_CELLS` would pin 4.0 MiB for every chunk. The shape is fixed for the lifetime of a run, so the
+//! [`ObsShape`], where a worst-case fixed array of `MAX_ENVS × MAX_CELLS`
+//! would pin megabytes for every chunk. The shape is fixed for the lifetime
+//! of a run, so the
 //! publisher allocates with the `Static` strategy and never regrows.
 //!
 //! [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,
@@ -58,13 +64,25 @@ pub mod flags {
 }
 
 /// What one environment reports after one step: the reward of the action,
-/// how the episode stands, and the agent's state in the observation.
+/// how the episode stands, the agent's state in the observation, and where
+/// the action left the agent.
 ///
 /// Position `x` is the column from the left, `y` the row from the top;
 /// `dir` is 0 right, 1 down, 2 left, 3 up; `carrying` is a cell code
 /// (`sim::Object as u8`) or [`EnvMeta::CARRYING_NOTHING`].
+///
+/// ## The final state of a finished episode
+/// With same-step auto-reset, the record of a step that ended an episode
+/// (`flags & DONE`) holds the *next* episode's first pose in `x, y, dir,
+/// carrying`. The pose the action actually led to — the finished episode's
+/// final state, where arrival is judged — is in `end_x, end_y, end_dir,
+/// end_carrying` ([`EnvMeta::end_cell`]); the batch carries the final grid
+/// beside the observation's ([`ObsBatch::final_cells`]), so a truncated step
+/// can be bootstrapped from the value of its final state (Gymnasium's
+/// `final_obs`). On every other step the `end_*` fields equal the
+/// observation's pose.
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
-#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.EnvMeta.v2"))]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.EnvMeta.v3"))]
 #[repr(C)]
 pub struct EnvMeta {
     /// Reward of the step that produced this record.
@@ -85,6 +103,16 @@ pub struct EnvMeta {
     pub flags: u8,
     /// Balls collected in the current (or just finished) episode.
     pub balls: u8,
+    /// Column the step's action left the agent in (before any auto-reset).
+    pub end_x: u16,
+    /// Row the step's action left the agent in (before any auto-reset).
+    pub end_y: u16,
+    /// Facing after the step's action (before any auto-reset).
+    pub end_dir: u8,
+    /// Carried object after the step's action (before any auto-reset).
+    pub end_carrying: u8,
+    /// Zero; keeps the record free of implicit padding.
+    pub reserved: u16,
 }
 
 impl EnvMeta {
@@ -102,6 +130,11 @@ impl EnvMeta {
         carrying: Self::CARRYING_NOTHING,
         flags: 0,
         balls: 0,
+        end_x: 0,
+        end_y: 0,
+        end_dir: 0,
+        end_carrying: Self::CARRYING_NOTHING,
+        reserved: 0,
     };
 
     /// True when this step ended the episode (terminated or truncated).
@@ -116,6 +149,25 @@ impl EnvMeta {
     pub fn truncated(&self) -> bool {
         self.flags & flags::TRUNCATED != 0
     }
+    /// Row-major cell index of the observation's agent on a grid `width`
+    /// cells wide.
+    pub fn cell(&self, width: usize) -> usize {
+        self.y as usize * width + self.x as usize
+    }
+    /// Row-major cell index where the step's action left the agent: the
+    /// finished episode's final cell on a step that ended it, the
+    /// observation's cell otherwise.
+    pub fn end_cell(&self, width: usize) -> usize {
+        self.end_y as usize * width + self.end_x as usize
+    }
+    /// Sets the `end_*` fields to the observation's pose (a step that did
+    /// not end an episode, or a reset).
+    pub fn end_at_agent(&mut self) {
+        self.end_x = self.x;
+        self.end_y = self.y;
+        self.end_dir = self.dir;
+        self.end_carrying = self.carrying;
+    }
 }
 
 impl Default for EnvMeta {
@@ -124,7 +176,7 @@ impl Default for EnvMeta {
     }
 }
 
-const _: () = assert!(std::mem::size_of::<EnvMeta>() == 20);
+const _: () = assert!(std::mem::size_of::<EnvMeta>() == 28);
 const _: () = assert!(std::mem::align_of::<EnvMeta>() == 4);
 
 /// Shape of the observation batches of a run: batch size and grid size.
@@ -196,7 +248,7 @@ impl ObsShape {
     pub const fn cells_per_env(&self) -> usize {
         self.width as usize * self.height as usize
     }
-    /// Bytes of the `EnvMeta` block (`20 · N`).
+    /// Bytes of the `EnvMeta` block (`28 · N`).
     pub const fn meta_bytes(&self) -> usize {
         self.envs() * size_of::<EnvMeta>()
     }
@@ -208,9 +260,13 @@ impl ObsShape {
     pub const fn cells_bytes(&self) -> usize {
         self.envs() * self.cells_per_env()
     }
+    /// Byte offset of the final-cells block in the payload.
+    pub const fn final_cells_offset(&self) -> usize {
+        (self.cells_offset() + self.cells_bytes()).next_multiple_of(CELLS_ALIGN)
+    }
     /// Payload bytes actually used.
     pub const fn payload_bytes(&self) -> usize {
-        self.cells_offset() + self.cells_bytes()
+        self.final_cells_offset() + self.cells_bytes()
     }
     /// Payload length in `u64` words (the iceoryx2 slice length).
     pub const fn payload_words(&self) -> usize {
@@ -224,7 +280,7 @@ impl ObsShape {
 
 /// Header of an observation batch (iceoryx2 user header of `wg/<run>/obs`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
-#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.ObsHeader.v2"))]
+#[cfg_attr(feature = "ipc", derive(ZeroCopySend), type_name("wg.ObsHeader.v3"))]
 #[repr(C)]
 pub struct ObsHeader {
     /// [`SCHEMA_VERSION`] of the writer.
@@ -313,6 +369,9 @@ pub struct ObsBatch<'a> {
     pub meta: &'a [EnvMeta],
     /// `N × H × W` cell bytes, environment `i` at `i·H·W`, row-major.
     pub cells: &'a [u8],
+    /// `N × H × W` final cells of the episodes that ended with this step
+    /// (environment `i`'s block is meaningful only where `meta[i].done()`).
+    pub final_cells: &'a [u8],
 }
 
 impl<'a> ObsBatch<'a> {
@@ -328,11 +387,13 @@ impl<'a> ObsBatch<'a> {
         let bytes: &[u8] = bytemuck::cast_slice(payload);
         check_len(Channel::Obs, expected.payload_bytes(), bytes.len())?;
         let meta = bytemuck::cast_slice(&bytes[..expected.meta_bytes()]);
-        let cells = &bytes[expected.cells_offset()..expected.payload_bytes()];
+        let cells = &bytes[expected.cells_offset()..][..expected.cells_bytes()];
+        let final_cells = &bytes[expected.final_cells_offset()..expected.payload_bytes()];
         Ok(ObsBatch {
             header,
             meta,
             cells,
+            final_cells,
         })
     }
 
@@ -360,6 +421,8 @@ pub struct ObsBatchMut<'a> {
     pub meta: &'a mut [EnvMeta],
     /// `N × H × W` cell bytes, environment `i` at `i·H·W`, row-major.
     pub cells: &'a mut [u8],
+    /// `N × H × W` final cells (see [`ObsBatch::final_cells`]).
+    pub final_cells: &'a mut [u8],
 }
 
 impl<'a> ObsBatchMut<'a> {
@@ -378,17 +441,29 @@ impl<'a> ObsBatchMut<'a> {
         header.height = shape.height;
         let (meta, rest) = bytes.split_at_mut(shape.cells_offset());
         let meta = bytemuck::cast_slice_mut(&mut meta[..shape.meta_bytes()]);
-        let cells = &mut rest[..shape.cells_bytes()];
+        let (cells, rest) = rest.split_at_mut(shape.final_cells_offset() - shape.cells_offset());
+        let cells = &mut cells[..shape.cells_bytes()];
+        let final_cells = &mut rest[..shape.cells_bytes()];
         Ok(ObsBatchMut {
             header,
             meta,
             cells,
+            final_cells,
         })
     }
 
-    /// The three parts, for handing `meta` and `cells` to the simulator.
-    pub fn into_parts(self) -> (&'a mut ObsHeader, &'a mut [EnvMeta], &'a mut [u8]) {
-        (self.header, self.meta, self.cells)
+    /// The parts, for handing `meta`, `cells` and `final_cells` to the
+    /// simulator.
+    #[allow(clippy::type_complexity)]
+    pub fn into_parts(
+        self,
+    ) -> (
+        &'a mut ObsHeader,
+        &'a mut [EnvMeta],
+        &'a mut [u8],
+        &'a mut [u8],
+    ) {
+        (self.header, self.meta, self.cells, self.final_cells)
     }
 
     /// Environment `i`'s grid, mutable.
@@ -472,12 +547,13 @@ mod tests {
     fn layout_figures() {
         let s = shape();
         assert_eq!(s.cells_per_env(), 20);
-        assert_eq!(s.meta_bytes(), 60);
-        assert_eq!(s.cells_offset(), 64);
-        assert_eq!(s.payload_bytes(), 124);
-        assert_eq!(s.payload_words(), 16);
+        assert_eq!(s.meta_bytes(), 84);
+        assert_eq!(s.cells_offset(), 88);
+        assert_eq!(s.final_cells_offset(), 152);
+        assert_eq!(s.payload_bytes(), 212);
+        assert_eq!(s.payload_words(), 27);
         let big = ObsShape::new(1024, 25, 19).unwrap();
-        assert_eq!(big.payload_bytes(), 1024 * 20 + 1024 * 475);
+        assert_eq!(big.payload_bytes(), 1024 * 28 + 2 * 1024 * 475);
     }
 
     #[test]
@@ -519,7 +595,8 @@ mod tests {
         let mut header = ObsHeader::new(&s, 0);
         {
             let b = ObsBatchMut::new(&mut header, &mut words, &s).unwrap();
-            let (h, meta, cells) = b.into_parts();
+            let (h, meta, cells, final_cells) = b.into_parts();
+            final_cells.fill(9);
             h.seq = 7;
             h.run_id = 42;
             for (i, m) in meta.iter_mut().enumerate() {
@@ -542,6 +619,7 @@ mod tests {
             r.env_cells(1),
             &(20..40).map(|i| i as u8).collect::<Vec<_>>()[..]
         );
+        assert!(r.final_cells.len() == 60 && r.final_cells.iter().all(|&c| c == 9));
     }
 
     #[test]

@@ -25,6 +25,10 @@ use crate::layout::Layout;
 pub struct StepOut<'a> {
     /// `N × H × W` cell codes.
     pub cells: &'a mut [u8],
+    /// `N × H × W` final cells: environment `i`'s block receives the grid
+    /// its episode ended on when the step ends it, and is untouched
+    /// otherwise ([`shm_schemas::ObsBatch::final_cells`]).
+    pub final_cells: &'a mut [u8],
     /// `N` step records.
     pub meta: &'a mut [EnvMeta],
 }
@@ -34,6 +38,8 @@ pub struct StepOut<'a> {
 pub struct StepBuffers {
     /// `N × H × W` cell codes.
     pub cells: Vec<u8>,
+    /// `N × H × W` final cells of the episodes the last step ended.
+    pub final_cells: Vec<u8>,
     /// `N` step records.
     pub meta: Vec<EnvMeta>,
 }
@@ -43,6 +49,7 @@ impl StepBuffers {
     pub fn new(n: usize, cells_per_env: usize) -> StepBuffers {
         StepBuffers {
             cells: vec![0; n * cells_per_env],
+            final_cells: vec![0; n * cells_per_env],
             meta: vec![EnvMeta::EMPTY; n],
         }
     }
@@ -51,6 +58,7 @@ impl StepBuffers {
     pub fn out(&mut self) -> StepOut<'_> {
         StepOut {
             cells: &mut self.cells,
+            final_cells: &mut self.final_cells,
             meta: &mut self.meta,
         }
     }
@@ -171,6 +179,11 @@ impl BatchEnv {
             self.len() * self.cells_per_env,
             "cells buffer size"
         );
+        assert_eq!(
+            out.final_cells.len(),
+            out.cells.len(),
+            "final cells buffer size"
+        );
         assert_eq!(out.meta.len(), self.len(), "meta buffer size");
     }
 
@@ -195,20 +208,25 @@ impl BatchEnv {
         self.check(&out);
         assert_eq!(actions.len(), self.len(), "one action per environment");
         let (cpe, chunk) = (self.cells_per_env, self.chunk);
-        let StepOut { cells, meta } = out;
+        let StepOut {
+            cells,
+            final_cells,
+            meta,
+        } = out;
         let BatchEnv { envs, pool, .. } = self;
         match pool {
             Some(pool) => pool.install(|| {
                 envs.par_chunks_mut(chunk)
                     .zip(actions.par_chunks(chunk))
                     .zip(cells.par_chunks_mut(chunk * cpe))
+                    .zip(final_cells.par_chunks_mut(chunk * cpe))
                     .zip(meta.par_chunks_mut(chunk))
-                    .map(|(((envs, actions), cells), meta)| {
-                        step_chunk(envs, actions, cells, meta, cpe)
+                    .map(|((((envs, actions), cells), finals), meta)| {
+                        step_chunk(envs, actions, cells, finals, meta, cpe)
                     })
                     .sum()
             }),
-            None => step_chunk(envs, actions, cells, meta, cpe),
+            None => step_chunk(envs, actions, cells, final_cells, meta, cpe),
         }
     }
 }
@@ -218,17 +236,19 @@ fn step_chunk(
     envs: &mut [Env],
     actions: &[u8],
     cells: &mut [u8],
+    final_cells: &mut [u8],
     meta: &mut [EnvMeta],
     cpe: usize,
 ) -> usize {
     let mut ended = 0;
-    for (((env, &a), c), m) in envs
+    for ((((env, &a), c), f), m) in envs
         .iter_mut()
         .zip(actions)
         .zip(cells.chunks_exact_mut(cpe))
+        .zip(final_cells.chunks_exact_mut(cpe))
         .zip(meta.iter_mut())
     {
-        env.step(a, c, m);
+        env.step(a, c, f, m);
         ended += usize::from(m.done());
     }
     ended

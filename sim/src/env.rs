@@ -24,7 +24,11 @@
 //! EnvPool and gymnasium's vector envs "same-step" mode) the step that ends
 //! an episode returns the reward and flags of that step, the finished
 //! episode's return, length and ball count in [`EnvMeta`], and **the first
-//! observation of the next episode** (flag `RESET`). With [`AutoReset::Off`]
+//! observation of the next episode** (flag `RESET`); the finished episode's
+//! final state stays readable: the pose the action led to in `EnvMeta`'s
+//! `end_*` fields and the grid it ended on in the step's final cells
+//! ([`Env::step`]), so consumers judge arrival on the last step and
+//! bootstrap a truncated one from its final state. With [`AutoReset::Off`]
 //! the environment stays on its final state until [`Env::reset`]; stepping
 //! it again repeats the final flags with zero reward.
 //!
@@ -294,6 +298,7 @@ impl Env {
             ..EnvMeta::EMPTY
         };
         self.write_agent(meta);
+        meta.end_at_agent();
         cells.copy_from_slice(&self.grid);
     }
 
@@ -443,11 +448,19 @@ impl Env {
     }
 
     /// Takes one action and writes the next observation: the grid into
-    /// `cells` (`width × height` bytes) and the rest into `meta`. Allocates
-    /// nothing. See the module docs for what an ending step returns.
+    /// `cells` (`width × height` bytes) and the rest into `meta`; when the
+    /// step ends the episode, the grid it ended on goes into `final_cells`
+    /// (untouched otherwise). Allocates nothing. See the module docs for
+    /// what an ending step returns.
     #[inline]
-    pub fn step(&mut self, action: u8, cells: &mut [u8], meta: &mut EnvMeta) {
-        self.advance(action, meta);
+    pub fn step(
+        &mut self,
+        action: u8,
+        cells: &mut [u8],
+        final_cells: &mut [u8],
+        meta: &mut EnvMeta,
+    ) {
+        self.advance(action, meta, Some(final_cells));
         cells.copy_from_slice(&self.grid);
     }
 
@@ -458,6 +471,7 @@ impl Env {
     pub fn observe(&self, cells: &mut [u8], meta: &mut EnvMeta) {
         *meta = EnvMeta::EMPTY;
         self.write_agent(meta);
+        meta.end_at_agent();
         cells.copy_from_slice(&self.grid);
     }
 
@@ -465,13 +479,14 @@ impl Env {
     /// grid out (read it with [`Env::grid`]). For traces and walks.
     pub fn step_meta(&mut self, action: u8) -> EnvMeta {
         let mut meta = EnvMeta::EMPTY;
-        self.advance(action, &mut meta);
+        self.advance(action, &mut meta, None);
         meta
     }
 
-    /// Everything of a step but the grid copy.
+    /// Everything of a step but the observation's grid copy: the final
+    /// grid goes into `final_cells` when the step ends the episode.
     #[inline]
-    fn advance(&mut self, action: u8, meta: &mut EnvMeta) {
+    fn advance(&mut self, action: u8, meta: &mut EnvMeta, final_cells: Option<&mut [u8]>) {
         if action == action::RESET {
             self.reset_state();
             *meta = EnvMeta {
@@ -479,6 +494,7 @@ impl Env {
                 ..EnvMeta::EMPTY
             };
             self.write_agent(meta);
+            meta.end_at_agent();
             return;
         }
         if self.done_flags != 0 {
@@ -486,6 +502,10 @@ impl Env {
             meta.reward = 0.0;
             meta.flags = self.done_flags;
             self.write_agent(meta);
+            meta.end_at_agent();
+            if let Some(f) = final_cells {
+                f.copy_from_slice(&self.grid);
+            }
             return;
         }
         let (reward, terminated) = self.act(action);
@@ -503,17 +523,24 @@ impl Env {
         if truncated {
             f |= flags::TRUNCATED;
         }
+        // The pose the action led to, before any auto-reset.
+        self.write_agent(meta);
+        meta.end_at_agent();
         if f != 0 {
+            if let Some(out) = final_cells {
+                out.copy_from_slice(&self.grid);
+            }
             match self.shared.cfg.auto_reset {
                 AutoReset::SameStep => {
                     self.reset_state();
                     f |= flags::RESET;
+                    // The observation is the next episode's first.
+                    self.write_agent(meta);
                 }
                 AutoReset::Off => self.done_flags = f,
             }
         }
         meta.flags = f;
-        self.write_agent(meta);
     }
 
     #[inline]

@@ -86,11 +86,14 @@ proptest! {
             let acts: Vec<u8> = (0..n).map(|i| (a as usize + i * 3 + t) as u8 % 7).collect();
             batch.step(&acts, buf.out());
             for (i, env) in singles.iter_mut().enumerate() {
-                let mut cells = vec![0u8; cpe];
+                let (mut cells, mut finals) = (vec![0u8; cpe], vec![0u8; cpe]);
                 let mut meta = EnvMeta::EMPTY;
-                env.step(acts[i], &mut cells, &mut meta);
+                env.step(acts[i], &mut cells, &mut finals, &mut meta);
                 prop_assert_eq!(&buf.cells[i * cpe..(i + 1) * cpe], &cells[..]);
                 prop_assert_eq!(buf.meta[i], meta);
+                if meta.done() {
+                    prop_assert_eq!(&buf.final_cells[i * cpe..(i + 1) * cpe], &finals[..]);
+                }
             }
         }
     }
@@ -113,6 +116,7 @@ proptest! {
             two.step(&acts, b2.out());
             prop_assert_eq!(&b1.cells, &b2.cells);
             prop_assert_eq!(&b1.meta, &b2.meta);
+            prop_assert_eq!(&b1.final_cells, &b2.final_cells);
             ends += b1.meta.iter().filter(|m| m.flags & flags::DONE != 0).count();
         }
         prop_assert!(actions.len() < 30 || ends > 0, "episodes ended and reset along the way");
@@ -146,8 +150,10 @@ fn a_batch_stepped_in_slices_equals_the_whole_batch() {
     whole.reset(a.out());
     for (s, part) in parts.iter_mut().enumerate() {
         let (mut cells, mut meta) = split(&mut b, s);
+        let mut finals = vec![0u8; cells.len()];
         part.reset(sim::StepOut {
             cells: &mut cells,
+            final_cells: &mut finals,
             meta: &mut meta,
         });
         b.cells[s * per * cpe..(s + 1) * per * cpe].copy_from_slice(&cells);
@@ -161,17 +167,24 @@ fn a_batch_stepped_in_slices_equals_the_whole_batch() {
         whole.step(&actions, a.out());
         for (s, part) in parts.iter_mut().enumerate() {
             let (mut cells, mut meta) = split(&mut b, s);
+            let mut finals = b.final_cells[s * per * cpe..(s + 1) * per * cpe].to_vec();
             part.step(
                 &actions[s * per..(s + 1) * per],
                 sim::StepOut {
                     cells: &mut cells,
+                    final_cells: &mut finals,
                     meta: &mut meta,
                 },
             );
+            b.final_cells[s * per * cpe..(s + 1) * per * cpe].copy_from_slice(&finals);
             b.cells[s * per * cpe..(s + 1) * per * cpe].copy_from_slice(&cells);
             b.meta[s * per..(s + 1) * per].copy_from_slice(&meta);
         }
         assert_eq!(a.cells, b.cells, "cells differ at step {t}");
         assert_eq!(a.meta, b.meta, "metas differ at step {t}");
+        assert_eq!(
+            a.final_cells, b.final_cells,
+            "final cells differ at step {t}"
+        );
     }
 }

@@ -520,6 +520,7 @@ fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
                 &actions,
                 StepOut {
                     cells: &mut buf.cells,
+                    final_cells: &mut buf.final_cells,
                     meta: &mut buf.meta,
                 },
             );
@@ -582,6 +583,7 @@ pub fn socket_peer(a: SocketPeerArgs) -> anyhow::Result<std::process::ExitCode> 
             let view = learner::batch_env::ObsView {
                 seq: 0,
                 cells: &[],
+                final_cells: &[],
                 meta: metas,
                 width: 0,
                 height: 0,

@@ -16,6 +16,7 @@ use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::gcp::{GcpConfig, GoalConditionedPolicy};
+use learner::hrl::wide_narrow::Coverage;
 use learner::hrl::{
     AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, HrlAgent, IterationStats,
     WorldGraphInputs,
@@ -244,6 +245,13 @@ pub struct TestSummary {
     /// time to score).
     #[serde(default)]
     pub validation_wall_seconds: Vec<f64>,
+    /// Side `N` of the narrow window (WN).
+    #[serde(default)]
+    pub window_side: Option<usize>,
+    /// Which free cells the narrow goals can reach under the candidate set
+    /// the run used (WN).
+    #[serde(default)]
+    pub window_coverage: Option<Coverage>,
 }
 
 fn agent_config(a: &TrainArgs, base: &AgentConfig) -> AgentConfig {
@@ -613,6 +621,10 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     )?;
 
     let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
+    let window_coverage = agent.window_coverage();
+    if let Some(c) = &window_coverage {
+        eprintln!("train: narrow goals: {c}");
+    }
     let mut state = RunState {
         identity: identity.clone(),
         segments_done: 0,
@@ -766,6 +778,8 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             .map(|r| (r.env_steps, r.validation_score))
             .collect(),
         validation_wall_seconds: state.wall_seconds.clone(),
+        window_side: window_coverage.as_ref().map(|c| c.side),
+        window_coverage,
     };
     write_atomic(
         &dir.join("test.json"),

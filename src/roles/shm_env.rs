@@ -269,6 +269,7 @@ impl<S: Service> BatchEnvironment for ShmEnv<S> {
         ObsView {
             seq: b.header.seq,
             cells: b.cells,
+            final_cells: b.final_cells,
             meta: b.meta,
             width: self.shape.width as usize,
             height: self.shape.height as usize,

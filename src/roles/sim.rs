@@ -220,8 +220,12 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
     for (k, batch) in slices.iter_mut().enumerate() {
         let mut sample = publisher.loan(k as u64, 0)?;
         {
-            let (_, meta, cells) = sample.batch_mut().into_parts();
-            batch.reset(StepOut { cells, meta });
+            let (_, meta, cells, final_cells) = sample.batch_mut().into_parts();
+            batch.reset(StepOut {
+                cells,
+                final_cells,
+                meta,
+            });
         }
         sent_at[k] = sample.send_stamped()?.1;
     }
@@ -297,9 +301,10 @@ pub fn serve(a: SimServeArgs) -> anyhow::Result<std::process::ExitCode> {
         let next = seq + k_slices;
         let mut sample = publisher.loan(next, next / k_slices)?;
         {
-            let (_, meta, cells) = sample.batch_mut().into_parts();
+            let (_, meta, cells, final_cells) = sample.batch_mut().into_parts();
             let out = StepOut {
                 cells,
+                final_cells,
                 meta: &mut records,
             };
             episodes += slices[slice].step(act.actions(), out) as u64;

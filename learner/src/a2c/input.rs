@@ -5,7 +5,10 @@
 //! the Manager, the Worker and `π_g`; sections 3.2 and 4) is the bird's-eye
 //! maze as one-hot planes `[N, C, H, W]`: one channel per object kind, four
 //! for the agent (one per facing), one plane set when the key is carried,
-//! and, for the goal-conditioned networks, one marking goal cells.
+//! and, for the goal-conditioned networks, one plane per goal slot marking
+//! its cell (`π_g` and the Feudal Worker: the goal; the Wide-then-Narrow
+//! Worker: `g_w` and `g_n` on planes of their own, so it can tell them
+//! apart).
 //!
 //! - [`encode_obs`] writes those planes densely: the plain path, a 3×3
 //!   convolution over mostly-zero input.
@@ -33,7 +36,8 @@ pub const OBJECT_CHANNELS: usize = sim::object::NUM_OBJECTS;
 pub const BASE_CHANNELS: usize = OBJECT_CHANNELS + 5;
 /// Channel of the carried-key plane.
 const KEY_CHANNEL: usize = OBJECT_CHANNELS + 4;
-/// Channel marking goal cells (goal-conditioned networks only).
+/// Channel marking the first goal slot's cell (goal-conditioned networks
+/// only); slot `k` marks channel `GOAL_CHANNEL + k`.
 pub const GOAL_CHANNEL: usize = BASE_CHANNELS;
 /// A goal slot that marks nothing.
 pub const NO_GOAL: u32 = u32::MAX;
@@ -44,13 +48,18 @@ const PAD_CODE: u64 = 0xF;
 
 /// Goal cells to mark, `per_env` slots per environment (unused slots hold
 /// [`NO_GOAL`]): one for `π_g` and the Feudal Worker, two (`g_w`, `g_n`)
-/// for the Wide-then-Narrow Worker.
+/// for the Wide-then-Narrow Worker. Slot `k` has its own input plane.
 #[derive(Debug, Clone, Copy)]
 pub struct GoalMarks<'a> {
     /// `N · per_env` cell indices.
     pub cells: &'a [u32],
     /// Slots per environment.
     pub per_env: usize,
+}
+
+/// Goal planes of a network input with `goals` (0 without).
+pub fn goal_planes(goals: Option<GoalMarks<'_>>) -> usize {
+    goals.map_or(0, |g| g.per_env)
 }
 
 impl<'a> GoalMarks<'a> {
@@ -75,7 +84,7 @@ fn object_channel(code: u8) -> usize {
 /// goals)`: the plain path's input.
 pub fn encode_obs(obs: &ObsView<'_>, goals: Option<GoalMarks<'_>>) -> Tensor {
     let (n, h, w) = (obs.num_envs(), obs.height, obs.width);
-    let c = BASE_CHANNELS + usize::from(goals.is_some());
+    let c = BASE_CHANNELS + goal_planes(goals);
     let hw = h * w;
     let mut buf = vec![0f32; n * c * hw];
     for i in 0..n {
@@ -92,9 +101,9 @@ pub fn encode_obs(obs: &ObsView<'_>, goals: Option<GoalMarks<'_>>) -> Tensor {
             buf[base + KEY_CHANNEL * hw..base + (KEY_CHANNEL + 1) * hw].fill(1.0);
         }
         if let Some(g) = goals {
-            for &gc in g.of(i) {
+            for (k, &gc) in g.of(i).iter().enumerate() {
                 if (gc as usize) < hw {
-                    buf[base + GOAL_CHANNEL * hw + gc as usize] = 1.0;
+                    buf[base + (GOAL_CHANNEL + k) * hw + gc as usize] = 1.0;
                 }
             }
         }
@@ -122,8 +131,7 @@ pub enum FirstLayer {
 pub struct CellInput {
     width: usize,
     height: usize,
-    goal_channel: bool,
-    /// Goal slots per observation (0 without the goal channel).
+    /// Goal slots (and goal planes) per observation.
     slots: usize,
     /// Object channel of every cell, observation after observation.
     codes: Vec<u8>,
@@ -136,20 +144,20 @@ pub struct CellInput {
 }
 
 impl CellInput {
-    /// An empty batch for `width × height` grids, with or without the goal
-    /// channel.
-    pub fn new(width: usize, height: usize, goal_channel: bool) -> CellInput {
+    /// An empty batch for `width × height` grids with `goal_planes` goal
+    /// slots, each on its own input plane (0: no goal).
+    pub fn new(width: usize, height: usize, goal_planes: usize) -> CellInput {
         CellInput {
             width,
             height,
-            goal_channel,
+            slots: goal_planes,
             ..CellInput::default()
         }
     }
 
     /// Input channels of the convolution this batch feeds.
     pub fn channels(&self) -> usize {
-        BASE_CHANNELS + usize::from(self.goal_channel)
+        BASE_CHANNELS + self.slots
     }
 
     /// Grid `(width, height)`.
@@ -185,20 +193,51 @@ impl CellInput {
 
     /// Appends environment `i` of `obs` only.
     pub fn push_env(&mut self, obs: &ObsView<'_>, i: usize, goals: Option<GoalMarks<'_>>) {
+        let m = &obs.meta[i];
+        let agent = m.y as usize * self.width + m.x as usize;
+        self.push_grid(obs, obs.env_cells(i), agent, m.dir, m.carrying, i, goals);
+    }
+
+    /// Appends the *final* state of environment `i`'s episode that ended
+    /// with the step that produced `obs`: the grid it ended on and the pose
+    /// the last action led to (`obs.meta[i].done()` must hold). The input
+    /// of the value that bootstraps a truncated step.
+    pub fn push_final_env(&mut self, obs: &ObsView<'_>, i: usize, goals: Option<GoalMarks<'_>>) {
+        let m = &obs.meta[i];
+        debug_assert!(m.done(), "only an ended episode has a final state");
+        let agent = m.end_y as usize * self.width + m.end_x as usize;
+        self.push_grid(
+            obs,
+            obs.env_final_cells(i),
+            agent,
+            m.end_dir,
+            m.end_carrying,
+            i,
+            goals,
+        );
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push_grid(
+        &mut self,
+        obs: &ObsView<'_>,
+        cells: &[u8],
+        agent: usize,
+        dir: u8,
+        carrying: u8,
+        i: usize,
+        goals: Option<GoalMarks<'_>>,
+    ) {
         debug_assert_eq!((obs.width, obs.height), (self.width, self.height));
         let hw = self.width * self.height;
         self.codes
-            .extend(obs.env_cells(i).iter().map(|&c| object_channel(c) as u8));
-        let m = &obs.meta[i];
-        let agent = m.y as usize * self.width + m.x as usize;
+            .extend(cells.iter().map(|&c| object_channel(c) as u8));
         self.agents
-            .push((if agent < hw { agent as u32 } else { u32::MAX }, m.dir & 3));
-        self.keys.push(m.carrying == sim::Object::Key as u8);
-        if self.goal_channel {
+            .push((if agent < hw { agent as u32 } else { u32::MAX }, dir & 3));
+        self.keys.push(carrying == sim::Object::Key as u8);
+        if self.slots > 0 {
             let g = goals.map_or(&[][..], |g| g.of(i));
-            if self.len() == 1 {
-                self.slots = g.len().max(1);
-            }
+            debug_assert!(g.len() <= self.slots, "more goal slots than planes");
             for k in 0..self.slots {
                 self.goals.push(g.get(k).copied().unwrap_or(NO_GOAL));
             }
@@ -219,10 +258,8 @@ impl CellInput {
             .extend_from_slice(&other.codes[k * hw..(k + 1) * hw]);
         self.agents.push(other.agents[k]);
         self.keys.push(other.keys[k]);
-        if self.goal_channel {
-            if self.is_empty() || self.slots == 0 {
-                self.slots = other.slots;
-            }
+        if self.slots > 0 {
+            debug_assert_eq!(self.slots, other.slots, "goal planes differ");
             self.goals
                 .extend_from_slice(&other.goals[k * other.slots..(k + 1) * other.slots]);
         }
@@ -245,9 +282,12 @@ impl CellInput {
             if self.keys[i] {
                 buf[base + KEY_CHANNEL * hw..base + (KEY_CHANNEL + 1) * hw].fill(1.0);
             }
-            for &g in &self.goals[i * self.slots..(i + 1) * self.slots] {
+            for (k, &g) in self.goals[i * self.slots..(i + 1) * self.slots]
+                .iter()
+                .enumerate()
+            {
                 if (g as usize) < hw {
-                    buf[base + GOAL_CHANNEL * hw + g as usize] = 1.0;
+                    buf[base + (GOAL_CHANNEL + k) * hw + g as usize] = 1.0;
                 }
             }
         }
@@ -350,9 +390,12 @@ pub fn first_conv(
                 if agent != u32::MAX {
                     mark(i, agent, OBJECT_CHANNELS + dir as usize);
                 }
-                for &g in &input.goals[i * input.slots..(i + 1) * input.slots] {
+                for (k, &g) in input.goals[i * input.slots..(i + 1) * input.slots]
+                    .iter()
+                    .enumerate()
+                {
                     if (g as usize) < hw {
-                        mark(i, g, GOAL_CHANNEL);
+                        mark(i, g, GOAL_CHANNEL + k);
                     }
                 }
             }
@@ -416,6 +459,7 @@ mod tests {
             let obs = ObsView {
                 seq: 0,
                 cells: &cells,
+                final_cells: &[],
                 meta: &meta,
                 width: w,
                 height: h,
@@ -433,7 +477,7 @@ mod tests {
                 cells: &goal_cells,
                 per_env: goal_slots,
             });
-            let channels = BASE_CHANNELS + usize::from(goals.is_some());
+            let channels = BASE_CHANNELS + goal_planes(goals);
             let out = 16;
             // Double precision, so that the comparison is of the functions
             // and not of float rounding in two summation orders.
@@ -459,7 +503,7 @@ mod tests {
             let _ = weight.grad().zero_();
             let _ = bias.grad().zero_();
 
-            let mut input = CellInput::new(w, h, goals.is_some());
+            let mut input = CellInput::new(w, h, goal_planes(goals));
             input.push_obs(&obs, goals);
             assert_eq!(input.len(), n);
             assert!(
@@ -499,20 +543,21 @@ mod tests {
         let obs = ObsView {
             seq: 0,
             cells: &cells,
+            final_cells: &[],
             meta: &meta,
             width: w,
             height: h,
         };
-        let mut whole = CellInput::new(w, h, false);
+        let mut whole = CellInput::new(w, h, 0);
         whole.push_obs(&obs, None);
-        let mut parts = CellInput::new(w, h, false);
-        let mut one = CellInput::new(w, h, false);
+        let mut parts = CellInput::new(w, h, 0);
+        let mut one = CellInput::new(w, h, 0);
         for i in 0..n {
             one.clear();
             one.push_env(&obs, i, None);
             parts.extend_from(&one);
         }
-        let mut picked = CellInput::new(w, h, false);
+        let mut picked = CellInput::new(w, h, 0);
         for i in 0..n {
             picked.extend_one(&whole, i);
         }

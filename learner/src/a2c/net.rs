@@ -33,8 +33,9 @@ pub struct ActorCriticConfig {
     pub hidden: i64,
     /// Actions of the policy head.
     pub num_actions: i64,
-    /// Whether a goal channel is part of the input (`π_g`, the Worker).
-    pub goal_channel: bool,
+    /// Goal planes of the input: 0 (the A2C baseline), 1 (`π_g`, the
+    /// Feudal Worker), 2 (the Wide-then-Narrow Worker: `g_w`, `g_n`).
+    pub goal_planes: usize,
 }
 
 impl Default for ActorCriticConfig {
@@ -43,7 +44,7 @@ impl Default for ActorCriticConfig {
             conv_channels: [16, 32],
             hidden: 128,
             num_actions: 3,
-            goal_channel: false,
+            goal_planes: 0,
         }
     }
 }
@@ -51,7 +52,7 @@ impl Default for ActorCriticConfig {
 impl ActorCriticConfig {
     /// Input channels.
     pub fn in_channels(&self) -> i64 {
-        (BASE_CHANNELS + usize::from(self.goal_channel)) as i64
+        (BASE_CHANNELS + self.goal_planes) as i64
     }
 }
 

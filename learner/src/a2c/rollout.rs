@@ -25,7 +25,7 @@
 
 use tch::{Kind, Tensor, nn};
 
-use super::input::{CellInput, GoalMarks, encode_obs};
+use super::input::{CellInput, GoalMarks, encode_obs, goal_planes};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
 use super::{A2cConfig, Categorical, LossFigures, PhaseTimes, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
@@ -82,12 +82,12 @@ impl Rollout {
         num_envs: usize,
         width: usize,
         height: usize,
-        goal_channel: bool,
+        goal_planes: usize,
     ) -> Rollout {
         Rollout {
             path,
             num_envs,
-            inputs: CellInput::new(width, height, goal_channel),
+            inputs: CellInput::new(width, height, goal_planes),
             graph_logits: Vec::new(),
             graph_values: Vec::new(),
             actions: Vec::new(),
@@ -140,7 +140,7 @@ impl Rollout {
         let t0 = std::time::Instant::now();
         match self.path {
             GradPath::Recompute => {
-                let mut input = CellInput::new(obs.width, obs.height, goals.is_some());
+                let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
                 input.push_obs(obs, goals);
                 self.inputs.extend_from(&input);
                 let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
@@ -153,7 +153,7 @@ impl Rollout {
                 let (x, input) = if self.path == GradPath::Plain {
                     (Some(encode_obs(obs, goals)), None)
                 } else {
-                    let mut input = CellInput::new(obs.width, obs.height, goals.is_some());
+                    let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
                     input.push_obs(obs, goals);
                     (None, Some(input))
                 };
@@ -261,9 +261,55 @@ pub fn bootstrap_values(
     goals: Option<GoalMarks<'_>>,
     state: &LstmState,
 ) -> Vec<f32> {
-    let mut input = CellInput::new(obs.width, obs.height, goals.is_some());
+    let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
     input.push_obs(obs, goals);
     floats(&tch::no_grad(|| net.step(&input, state).value))
+}
+
+/// The values `V(s_final)` of the final states of environments `envs`,
+/// whose episodes were *truncated* by the step that produced `obs`, from
+/// `state` (the core state after that step, `[B, hidden]`, before any
+/// reset), without gradient. Truncation is not termination: the step's
+/// return goes on past the step limit, so its target is `r + γ·V(s_final)`
+/// (Gymnasium's `final_obs`; the step is then booked as done, see
+/// [`bootstrap_truncated`]).
+pub fn final_values(
+    net: &ActorCritic,
+    obs: &ObsView<'_>,
+    goals: Option<GoalMarks<'_>>,
+    state: &LstmState,
+    envs: &[usize],
+) -> Vec<f32> {
+    if envs.is_empty() {
+        return Vec::new();
+    }
+    let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
+    for &e in envs {
+        input.push_final_env(obs, e, goals);
+    }
+    let idx = Tensor::from_slice(&envs.iter().map(|&e| e as i64).collect::<Vec<_>>());
+    floats(&tch::no_grad(|| net.step(&input, &state.select(&idx)).value))
+}
+
+/// Adds `γ·V(s_final)` to the rewards of the environments `envs` whose
+/// episode the step truncated ([`final_values`]); their `done` stays set,
+/// so nothing is bootstrapped from the next episode's first state.
+#[allow(clippy::too_many_arguments)]
+pub fn bootstrap_truncated(
+    rewards: &mut [f32],
+    net: &ActorCritic,
+    obs: &ObsView<'_>,
+    goals: Option<GoalMarks<'_>>,
+    state: &LstmState,
+    envs: &[usize],
+    gamma: f64,
+) {
+    for (&e, v) in envs
+        .iter()
+        .zip(final_values(net, obs, goals, state, envs))
+    {
+        rewards[e] += gamma as f32 * v;
+    }
 }
 
 /// The values of a float tensor.
@@ -296,7 +342,7 @@ mod tests {
         let cfg = EnvConfig::for_task(Task::MultiGoal, layout);
         let mut env = InProcess::new(layout.clone(), cfg, n, seed, 1).expect("env");
         let mut rng = SmallRng::seed_from_u64(seed);
-        let mut rollout = Rollout::new(path, n, layout.width, layout.height, true);
+        let mut rollout = Rollout::new(path, n, layout.width, layout.height, 1);
         let mut state = net.zero_state(n as i64);
         rollout.start(&state);
         let goals: Vec<u32> = (0..n as u32).map(|i| 14 + 3 * i).collect();
@@ -328,7 +374,7 @@ mod tests {
                     conv_channels: [8, 16],
                     hidden: 32,
                     num_actions: 3,
-                    goal_channel: true,
+                    goal_planes: 1,
                 },
                 layout.width,
                 layout.height,

@@ -15,7 +15,9 @@
 //! A Manager *decision* is taken at the start of an episode and whenever
 //! its interval ends; its reward is the task's rewards summed over the `k`
 //! steps of the interval, and its transition is discounted by `γ^k`
-//! ([`interval_transition`]). The Manager's core steps once per decision.
+//! ([`interval_transition`]). An interval that the episode's step limit
+//! cut (truncation, not termination) bootstraps from the Manager's value of
+//! the episode's final state ([`Manager::final_values`]). The Manager's core steps once per decision.
 //! Decisions are kept per environment ([`DecisionQueue`]); an interval
 //! still running at the end of a rollout is trained in the next one: the
 //! queue carries it over together with the core state before it, so every
@@ -30,18 +32,26 @@ use crate::a2c::input::CellInput;
 use crate::a2c::net::{LstmState, Trunk};
 use crate::a2c::rollout::floats;
 use crate::a2c::{A2cConfig, Categorical, LossFigures, PolicyTerms, a2c_loss, advantages};
+use crate::batch_env::ObsView;
 
 /// The reward and discount of one Manager transition: the task rewards of
 /// the interval summed, `γ^k` over its `k` steps, 0 where the interval
-/// ended the episode.
-pub fn interval_transition(rewards: &[f32], gamma: f64, episode_ended: bool) -> (f32, f32) {
+/// ended the episode; an interval the step limit cut adds `γ^k · V(s_final)`
+/// (`final_value`) to its reward instead of bootstrapping from the next
+/// episode's start.
+pub fn interval_transition(
+    rewards: &[f32],
+    gamma: f64,
+    episode_ended: bool,
+    final_value: Option<f32>,
+) -> (f32, f32) {
     let sum: f32 = rewards.iter().sum();
-    let discount = if episode_ended {
-        0.0
-    } else {
-        gamma.powi(rewards.len() as i32) as f32
-    };
-    (sum, discount)
+    let gk = gamma.powi(rewards.len() as i32) as f32;
+    match (episode_ended, final_value) {
+        (true, Some(v)) => (sum + gk * v, 0.0),
+        (true, None) => (sum, 0.0),
+        (false, _) => (sum, gk),
+    }
 }
 
 /// The Manager's goal head.
@@ -82,6 +92,9 @@ pub struct Decision {
     pub complete: bool,
     /// The interval ended the episode.
     pub episode_ended: bool,
+    /// The Manager's value of the final state, where the episode's step
+    /// limit ended the interval (truncation).
+    pub final_value: Option<f32>,
 }
 
 /// One environment's decisions not yet trained, oldest first, and the
@@ -154,6 +167,18 @@ impl Manager {
         })
     }
 
+    /// The values of the final states of environments `envs`, whose
+    /// episodes the last step truncated, from `state` (the Manager's core
+    /// state after its last decision, `[B, hidden]`), without gradient.
+    pub fn final_values(&self, obs: &ObsView<'_>, state: &LstmState, envs: &[usize]) -> Vec<f32> {
+        let mut input = CellInput::new(obs.width, obs.height, 0);
+        for &e in envs {
+            input.push_final_env(obs, e, None);
+        }
+        let idx = Tensor::from_slice(&envs.iter().map(|&e| e as i64).collect::<Vec<_>>());
+        self.act(&input, &state.select(&idx)).1
+    }
+
     /// FN: the subgoal distribution of core outputs `h`.
     pub fn feudal_policy(&self, h: &Tensor) -> Option<Categorical> {
         match &self.head {
@@ -190,7 +215,7 @@ impl Manager {
             .find_map(|q| q.decisions.first())
             .expect("invariant: every environment has an interval under way")
             .input;
-        let mut input = CellInput::new(template_grid(template).0, template_grid(template).1, false);
+        let mut input = CellInput::new(template_grid(template).0, template_grid(template).1, 0);
         let n = k_max * b;
         let (mut reset, mut rewards, mut discounts, mut values, mut weights) = (
             vec![0f32; n],
@@ -227,7 +252,8 @@ impl Manager {
                     valid[i * window..(i + 1) * window].copy_from_slice(&d.valid);
                 }
                 if d.complete {
-                    let (r, disc) = interval_transition(&d.rewards, gamma, d.episode_ended);
+                    let (r, disc) =
+                        interval_transition(&d.rewards, gamma, d.episode_ended, d.final_value);
                     rewards[i] = r;
                     discounts[i] = disc;
                     weights[i] = 1.0;
@@ -306,13 +332,13 @@ mod tests {
     fn interval_returns_equal_the_closed_form() {
         // A hand-made interval of 4 steps: three step penalties and a ball.
         let rewards = [-0.01f32, -0.01, 0.99, -0.01];
-        let (r, d) = interval_transition(&rewards, 0.9, false);
+        let (r, d) = interval_transition(&rewards, 0.9, false, None);
         assert!((r - 0.96).abs() < 1e-6);
         assert!((d - 0.9f32.powi(4)).abs() < 1e-7);
         // The Manager's advantage over two intervals: Â_0 = r_0 + γ^4 V_1 −
         // V_0 + γ^4 λ (r_1 + γ^2 · 0 − V_1) with the second ending the
         // episode after 2 steps.
-        let (r1, d1) = interval_transition(&[0.5, 1.0], 0.9, true);
+        let (r1, d1) = interval_transition(&[0.5, 1.0], 0.9, true, None);
         assert_eq!(d1, 0.0);
         let (v0, v1, lambda) = (0.3f32, 0.7f32, 0.95f32);
         let (adv, ret) = advantages(&[r, r1], &[v0, v1], &[d, d1], &[0.0], lambda);
@@ -321,5 +347,10 @@ mod tests {
         assert!((adv[1] - a1).abs() < 1e-6);
         assert!((adv[0] - a0).abs() < 1e-6);
         assert!((ret[0] - (a0 + v0)).abs() < 1e-6);
+        // Cut by the step limit after 2 steps: the final state's value
+        // goes on, discounted by γ².
+        let (r2, d2) = interval_transition(&[0.5, 1.0], 0.9, true, Some(2.0));
+        assert!((r2 - (1.5 + 0.81 * 2.0)).abs() < 1e-6);
+        assert_eq!(d2, 0.0);
     }
 }

@@ -57,6 +57,28 @@ pub fn copy_from(src: &nn::VarStore, dst: &nn::VarStore, prefixes: &[&str]) -> I
     report
 }
 
+/// Starts every goal plane of `dst`'s first convolution past
+/// `goal_channel` from `src`'s goal plane `goal_channel`: the
+/// Wide-then-Narrow Worker marks `g_w` and `g_n` on planes of their own,
+/// and both are cells to reach, as `π_g`'s one goal is.
+pub fn copy_goal_plane(src: &nn::VarStore, dst: &nn::VarStore, goal_channel: usize) {
+    const CONV1: &str = "encoder/conv1/weight";
+    let (from, to) = (src.variables(), dst.variables());
+    let (Some(s), Some(d)) = (from.get(CONV1), to.get(CONV1)) else {
+        return;
+    };
+    let (planes_src, planes_dst) = (s.size()[1], d.size()[1]);
+    let g = goal_channel as i64;
+    if planes_src <= g || s.size()[0] != d.size()[0] {
+        return;
+    }
+    tch::no_grad(|| {
+        for k in planes_src..planes_dst {
+            d.narrow(1, k, 1).copy_(&s.narrow(1, g, 1));
+        }
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -71,7 +93,7 @@ mod tests {
             conv_channels: [4, 8],
             hidden: 16,
             num_actions: 3,
-            goal_channel: true,
+            goal_planes: 1,
         };
         let _gcp = crate::seeding::init_seeded(1, || ActorCritic::new(&src.root(), &gcp_cfg, w, h));
         // A Door-Key Worker: six actions.

@@ -39,10 +39,10 @@ use shm_schemas::EnvMeta;
 use sim::{Layout, Task, action};
 use tch::{Device, Tensor, nn};
 
-use crate::a2c::input::{CellInput, GoalMarks, NO_GOAL, mask};
+use crate::a2c::input::{CellInput, GOAL_CHANNEL, GoalMarks, NO_GOAL, goal_planes, mask};
 use crate::a2c::net::{ActorCritic, ActorCriticConfig, LstmState, Trunk};
 use crate::a2c::optim::Adam;
-use crate::a2c::rollout::{GradPath, Rollout, bootstrap_values};
+use crate::a2c::rollout::{GradPath, Rollout, bootstrap_truncated, bootstrap_values};
 use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
 use crate::batch_env::{BatchEnvironment, ObsView};
 use crate::error::{ConfigError, LearnerError};
@@ -51,7 +51,7 @@ use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
 use steering::{Leg, Steering};
 use traversal::{Execution, Progress, Traversal};
 use wide_narrow::{WideNarrowHead, Window};
-use worker::WorkerGoal;
+use worker::{EpisodeEnd, WorkerGoal};
 
 /// Which agent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -99,8 +99,11 @@ pub struct AgentConfig {
     /// Manager horizon `c` in Worker steps; 0: a third of the rollout (the
     /// paper's choice).
     pub horizon: usize,
-    /// Side `N` of the narrow window; 0: 5 on grids up to 25 cells wide, 7
-    /// beyond (the paper: 5×5 small and medium, 7×7 large).
+    /// Side `N` of the narrow window; 0: auto, the paper's 5 on grids up to
+    /// 25 cells wide and 7 beyond (5×5 small and medium, 7×7 large), widened
+    /// to the smallest odd side whose windows around the wide-goal
+    /// candidates cover every free cell ([`wide_narrow::covering_side`]).
+    /// A non-zero side is used as given.
     pub window: usize,
     /// Output channels of the encoder's convolutions.
     pub conv_channels: [i64; 2],
@@ -191,6 +194,16 @@ impl AgentConfig {
             0 if width > 25 => 7,
             0 => 5,
             n => n,
+        }
+    }
+
+    /// Goal planes of the Worker's input: none for the baseline, the
+    /// subgoal for FN, `g_w` and `g_n` on planes of their own for WN.
+    pub fn goal_planes(&self) -> usize {
+        match self.kind {
+            AgentKind::A2c => 0,
+            AgentKind::Feudal => 1,
+            AgentKind::WideNarrow => 2,
         }
     }
 
@@ -327,7 +340,8 @@ pub struct EvalResult {
 /// One evaluation episode, for the picture of the paper's Figure 1.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct EpisodeTrace {
-    /// The agent's cell before the first step and after each.
+    /// The agent's cell before the first step and after each (after the
+    /// last, the cell the episode ended on).
     pub cells: Vec<u32>,
     /// Whether each step was taken by traversal.
     pub traversed: Vec<bool>,
@@ -412,7 +426,7 @@ impl HrlAgent {
             conv_channels: cfg.conv_channels,
             hidden: cfg.hidden,
             num_actions: num_actions as i64,
-            goal_channel: hierarchical,
+            goal_planes: cfg.goal_planes(),
         };
         let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
             (AgentKind::WideNarrow, Candidates::All) => planner::pivotal::v_all(layout)
@@ -426,8 +440,13 @@ impl HrlAgent {
                 .unwrap_or_default(),
             _ => Vec::new(),
         };
-        let window = (cfg.kind == AgentKind::WideNarrow)
-            .then(|| Window::new(cfg.window_side(width), layout));
+        let window = (cfg.kind == AgentKind::WideNarrow).then(|| {
+            let side = match cfg.window {
+                0 => wide_narrow::covering_side(cfg.window_side(width), &candidates, layout),
+                n => n,
+            };
+            Window::new(side, layout)
+        });
         let valid_cells: Vec<bool> = {
             let mut v = vec![false; width * height];
             for c in planner::pivotal::v_all(layout) {
@@ -482,6 +501,7 @@ impl HrlAgent {
                 &worker_vs,
                 &["encoder", "core", "policy", "value"],
             );
+            init::copy_goal_plane(gcp.var_store(), &worker_vs, GOAL_CHANNEL);
             if let Some(vs) = &manager_vs {
                 let m = init::copy_from(gcp.var_store(), vs, &["encoder"]);
                 report
@@ -529,7 +549,13 @@ impl HrlAgent {
             height,
             num_actions,
             horizon: cfg.horizon(),
-            rollout: Rollout::new(GradPath::default(), cfg.envs, width, height, hierarchical),
+            rollout: Rollout::new(
+                GradPath::default(),
+                cfg.envs,
+                width,
+                height,
+                cfg.goal_planes(),
+            ),
             worker_vs,
             worker,
             worker_opt,
@@ -575,6 +601,12 @@ impl HrlAgent {
         &self.candidates
     }
 
+    /// Which free cells can be narrow goals: the coverage of the windows
+    /// around `V` (WN).
+    pub fn window_coverage(&self) -> Option<wide_narrow::Coverage> {
+        self.window.as_ref().map(|w| w.coverage(&self.candidates))
+    }
+
     /// The world graph traversal follows.
     pub fn graph(&self) -> Option<&WorldGraph> {
         self.graph.as_ref()
@@ -588,7 +620,7 @@ impl HrlAgent {
             self.cfg.envs,
             self.width,
             self.height,
-            self.hierarchical(),
+            self.cfg.goal_planes(),
         );
     }
 
@@ -600,7 +632,7 @@ impl HrlAgent {
         let fresh = EnvCtl {
             need_decision: true,
             manager_reset: true,
-            goal: WorkerGoal::new(NO_GOAL, NO_GOAL),
+            goal: WorkerGoal::new(NO_GOAL, NO_GOAL, NO_GOAL),
             traversal: None,
         };
         Controller {
@@ -671,24 +703,15 @@ impl HrlAgent {
         }
     }
 
-    /// Goal marks of the Worker's input: one slot (FN) or two (WN).
+    /// Goal marks of the Worker's input: the subgoal (FN), or `g_w` and
+    /// `g_n` on planes of their own (WN), `g_w` only until it is paid (the
+    /// Worker is rewarded for it once per interval).
     fn goal_marks(&self, ctl: &Controller) -> Vec<u32> {
-        match self.cfg.kind {
-            AgentKind::WideNarrow => ctl
-                .envs
-                .iter()
-                .flat_map(|e| [e.goal.wide, e.goal.narrow])
-                .collect(),
-            _ => ctl.envs.iter().map(|e| e.goal.narrow).collect(),
-        }
+        worker_goal_marks(self.cfg.kind, ctl.envs.iter().map(|e| &e.goal))
     }
 
     fn slots(&self) -> usize {
-        if self.cfg.kind == AgentKind::WideNarrow {
-            2
-        } else {
-            1
-        }
+        self.cfg.goal_planes()
     }
 
     /// The Manager decides for every environment that needs a new goal;
@@ -710,7 +733,7 @@ impl HrlAgent {
             return;
         }
         let idx = Tensor::from_slice(&who.iter().map(|&e| e as i64).collect::<Vec<_>>());
-        let mut input = CellInput::new(self.width, self.height, false);
+        let mut input = CellInput::new(self.width, self.height, 0);
         for &e in &who {
             input.push_env(obs, e, None);
         }
@@ -750,14 +773,25 @@ impl HrlAgent {
                 for (j, &e) in who.iter().enumerate() {
                     let gw = self.candidates[wide[j]];
                     locals.push(window.local_input(obs, e, gw));
-                    valids.push(window.valid(gw));
+                    // The agent's own cell is no goal (reaching means
+                    // arriving), unless the window holds nothing else.
+                    let mut valid = window.valid(gw);
+                    let here = obs.meta[e].cell(self.width) as u32;
+                    if let Some(k) = window.slot_of(gw, here)
+                        && valid.iter().filter(|&&v| v).count() > 1
+                    {
+                        valid[k] = false;
+                    }
+                    valids.push(valid);
                 }
                 let local = Tensor::from_slice(&locals.concat()).view([who.len() as i64, -1]);
                 let valid = Tensor::from_slice(&valids.concat()).view([who.len() as i64, -1]);
+                let wide_idx =
+                    Tensor::from_slice(&wide.iter().map(|&k| k as i64).collect::<Vec<_>>());
                 let narrow = tch::no_grad(|| {
                     crate::seeding::sample_index(
                         &mut ctl.rng,
-                        &head.narrow(&h, &local, &valid).probs(),
+                        &head.narrow(&h, &wide_idx, &local, &valid).probs(),
                     )
                 });
                 for j in 0..who.len() {
@@ -779,7 +813,7 @@ impl HrlAgent {
         for (j, (&e, (wide, narrow, gw, gn, local, valid))) in who.iter().zip(picks).enumerate() {
             let c = &mut ctl.envs[e];
             if record {
-                let mut one = CellInput::new(self.width, self.height, false);
+                let mut one = CellInput::new(self.width, self.height, 0);
                 one.push_env(obs, e, None);
                 ctl.queues[e].decisions.push(Decision {
                     input: one,
@@ -792,6 +826,7 @@ impl HrlAgent {
                     rewards: Vec::new(),
                     complete: false,
                     episode_ended: false,
+                    final_value: None,
                 });
             }
             if let Some((te, step, t)) = trace.as_mut()
@@ -801,7 +836,7 @@ impl HrlAgent {
             }
             c.need_decision = false;
             c.manager_reset = false;
-            c.goal = WorkerGoal::new(gw, gn);
+            c.goal = WorkerGoal::new(gw, gn, obs.meta[e].cell(self.width) as u32);
         }
         // A fresh goal episode for the Worker.
         let fresh: Vec<bool> = (0..ctl.envs.len()).map(|e| who.contains(&e)).collect();
@@ -925,7 +960,7 @@ impl HrlAgent {
                 self.rollout
                     .act(&self.worker, &obs, marks, &ctl.worker_state)
             } else {
-                let mut input = CellInput::new(self.width, self.height, marks.is_some());
+                let mut input = CellInput::new(self.width, self.height, goal_planes(marks));
                 input.push_obs(&obs, marks);
                 tch::no_grad(|| self.worker.step(&input, &ctl.worker_state))
             };
@@ -954,21 +989,25 @@ impl HrlAgent {
         let mut rewards = vec![0f32; n];
         let mut dones = vec![false; n];
         let mut weights = vec![0f32; n];
+        // Worker (baseline) steps and Manager intervals cut by the
+        // episode's step limit: bootstrapped from their final states.
+        let mut cut_worker: Vec<usize> = Vec::new();
+        let mut cut_manager: Vec<usize> = Vec::new();
         for e in 0..n {
             let m: &EnvMeta = &obs.meta[e];
-            let ended = m.done();
-            let cell = (m.y as usize * self.width + m.x as usize) as u32;
+            let end = EpisodeEnd::of(m);
+            let ended = end.ended();
+            // Where the action led the agent: on a step that ended the
+            // episode, its final cell (the observation is the next start).
+            let cell = obs.end_cell(e);
             if ended {
                 stats.episodes += 1;
                 stats.returns += f64::from(m.episode_return);
-                stats.successes += usize::from(m.terminated() && m.reward > 0.0);
+                stats.successes += usize::from(reached_exit(&obs, e));
             }
             stats.steps += 1;
-            // (After an episode's end the observation is the next episode's
-            // first: the trace stops at the end.)
             if let Some((te, step, t)) = trace.as_mut()
                 && *te == e
-                && !ended
             {
                 t.cells.push(cell);
                 t.traversed.push(traversing[e]);
@@ -976,6 +1015,9 @@ impl HrlAgent {
             }
             if !self.hierarchical() {
                 (rewards[e], dones[e]) = a2c::task_step(m);
+                if m.truncated() {
+                    cut_worker.push(e);
+                }
                 weights[e] = 1.0;
                 continue;
             }
@@ -991,6 +1033,7 @@ impl HrlAgent {
             if traversing[e] {
                 stats.traversal_steps += 1;
                 dones[e] = true;
+                c.goal.moved_to(cell);
                 let t = c.traversal.as_mut().expect("traversing");
                 let progress = t.advance(cell, ended);
                 if let Some(before) = legs_before[e] {
@@ -1018,9 +1061,12 @@ impl HrlAgent {
                     }
                 }
             } else {
-                let mut s = c.goal.book(cell, ended, horizon, goal_r, penalty);
+                let mut s = c.goal.book(cell, end, horizon, goal_r, penalty);
                 stats.reached += usize::from(s.reached);
                 interval_over |= s.interval_over;
+                if s.bootstrap {
+                    cut_worker.push(e);
+                }
                 if !s.interval_over && self.graph.is_some() {
                     // Hand over to a traversal from here, if there is one.
                     if self.try_traverse(ctl, &obs, e) {
@@ -1046,10 +1092,42 @@ impl HrlAgent {
                 if train && let Some(q) = ctl.queues[e].decisions.last_mut() {
                     q.complete = true;
                     q.episode_ended = ended;
+                    if end == EpisodeEnd::Truncated {
+                        cut_manager.push(e);
+                    }
                 }
             }
         }
         if train {
+            // Truncation is not termination (Gymnasium's final_obs): the
+            // cut steps' targets go on from their final states' values.
+            let goals = self.goal_marks(ctl);
+            let marks = self.hierarchical().then(|| GoalMarks {
+                cells: &goals,
+                per_env: self.slots(),
+            });
+            bootstrap_truncated(
+                &mut rewards,
+                &self.worker,
+                &obs,
+                marks,
+                &out_state,
+                &cut_worker,
+                self.cfg.worker.gamma,
+            );
+            if let Some(manager) = &self.manager
+                && !cut_manager.is_empty()
+            {
+                let state = ctl.manager_state.as_ref().expect("a Manager has a state");
+                for (&e, v) in cut_manager
+                    .iter()
+                    .zip(manager.final_values(&obs, state, &cut_manager))
+                {
+                    if let Some(q) = ctl.queues[e].decisions.last_mut() {
+                        q.final_value = Some(v);
+                    }
+                }
+            }
             self.rollout.record(&actions, &rewards, &dones, &weights);
         }
         if steered && let Some(s) = self.steering.as_mut() {
@@ -1174,9 +1252,7 @@ impl HrlAgent {
         let mut counts = StepCounts::default();
         let mut trace = trace.map(|t| {
             *t = EpisodeTrace::default();
-            let m = &env.observe().meta[0];
-            t.cells
-                .push((m.y as usize * self.width + m.x as usize) as u32);
+            t.cells.push(env.observe().meta[0].cell(self.width) as u32);
             (0usize, 0u32, t)
         });
         while done.iter().any(|d| !d) {
@@ -1196,7 +1272,7 @@ impl HrlAgent {
                     done[e] = true;
                     returns[e] = m.episode_return;
                     lengths[e] = m.episode_len;
-                    success[e] = m.terminated() && m.reward > 0.0;
+                    success[e] = reached_exit(&obs, e);
                 }
             }
         }
@@ -1325,6 +1401,30 @@ impl HrlAgent {
             s.optimiser_mut().load_state(&strip("pi_g-")).map_err(bad)?;
         }
         Ok(())
+    }
+}
+
+/// Whether environment `e`'s episode ended, with the step that produced
+/// `obs`, by the agent stepping onto the exit (its success; judged on the
+/// final state, since the observation is the next episode's start).
+fn reached_exit(obs: &ObsView<'_>, e: usize) -> bool {
+    let m = &obs.meta[e];
+    m.terminated()
+        && obs
+            .final_cells
+            .get(e * obs.width * obs.height + obs.end_cell(e) as usize)
+            .is_some_and(|&c| c == sim::Object::Exit as u8)
+}
+
+/// The Worker's goal marks of `goals`, [`AgentConfig::goal_planes`] per
+/// environment ([`HrlAgent::goal_marks`]).
+fn worker_goal_marks<'a>(kind: AgentKind, goals: impl Iterator<Item = &'a WorkerGoal>) -> Vec<u32> {
+    match kind {
+        AgentKind::WideNarrow => goals
+            .flat_map(|g| [if g.wide_paid { NO_GOAL } else { g.wide }, g.narrow])
+            .collect(),
+        AgentKind::Feudal => goals.map(|g| g.narrow).collect(),
+        AgentKind::A2c => Vec::new(),
     }
 }
 

@@ -61,7 +61,7 @@ impl Steering {
     ) -> Steering {
         let cfg = gcp.config().a2c();
         Steering {
-            rollout: Rollout::new(GradPath::default(), num_envs, width, height, true),
+            rollout: Rollout::new(GradPath::default(), num_envs, width, height, 1),
             opt: Adam::new(&[("pi_g", gcp.var_store())], cfg.learning_rate),
             cfg,
             goal_reward,

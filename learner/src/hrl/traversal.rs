@@ -188,13 +188,21 @@ impl Traversal {
         self.leg_steps == 0
     }
 
-    /// Books the step just taken; `cell` is where the agent stands after
-    /// it and `episode_ended` whether the environment's episode ended.
+    /// Books the step just taken; `cell` is where its action led the agent
+    /// (on a step that ended the environment's episode, the finished
+    /// episode's final cell: [`ObsView::end_cell`]) and `episode_ended`
+    /// whether the episode ended. A route that reaches its target on the
+    /// episode's last step has arrived; otherwise the episode's end stops it.
     pub fn advance(&mut self, cell: u32, episode_ended: bool) -> Progress {
         self.steps += 1;
-        if episode_ended {
-            return Progress::Stopped;
+        let progress = self.progress(cell);
+        match progress {
+            Progress::Continue if episode_ended => Progress::Stopped,
+            p => p,
         }
+    }
+
+    fn progress(&mut self, cell: u32) -> Progress {
         match self.execution {
             Execution::Replay => {
                 let expected = self.cells[self.next];
@@ -269,6 +277,7 @@ mod tests {
         ObsView {
             seq: 0,
             cells,
+            final_cells: &[],
             meta,
             width: layout.width,
             height: layout.height,
@@ -287,6 +296,7 @@ mod tests {
                 for &to in &nodes {
                     let mut env = env_at(&layout, Task::MultiGoal, from, (from % 4) as u8);
                     let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
+        let mut finals = vec![0u8; layout.cells.len()];
                     env.observe(&mut cells, &mut meta[0]);
                     let t = Traversal::plan(
                         &g,
@@ -311,7 +321,7 @@ mod tests {
                     planned += 1;
                     loop {
                         let a = t.next_action().expect("an action while under way");
-                        env.step(a, &mut cells, &mut meta[0]);
+                        env.step(a, &mut cells, &mut finals, &mut meta[0]);
                         match t.advance(env.cell() as u32, meta[0].done()) {
                             Progress::Continue => {}
                             Progress::Arrived => break,
@@ -350,6 +360,7 @@ mod tests {
         let mut route = Route::default();
         let env = env_at(&layout, Task::DoorKey, left, 0);
         let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
+        let mut finals = vec![0u8; layout.cells.len()];
         env.observe(&mut cells, &mut meta[0]);
         let plan = |cells: &[u8], route: &mut Route| {
             Traversal::plan(
@@ -373,13 +384,13 @@ mod tests {
         let mut t = plan(&open, &mut route).expect("a route once the door is open");
         assert!(t.cells.contains(&door));
         let mut env = env_at(&layout, Task::DoorKey, left, 0);
-        env.step(sim::action::RIGHT, &mut cells, &mut meta[0]);
-        env.step(sim::action::LEFT, &mut cells, &mut meta[0]);
+        env.step(sim::action::RIGHT, &mut cells, &mut finals, &mut meta[0]);
+        env.step(sim::action::LEFT, &mut cells, &mut finals, &mut meta[0]);
         // Open the real door (toggle while facing it), then follow the route.
-        env.step(sim::action::TOGGLE, &mut cells, &mut meta[0]);
+        env.step(sim::action::TOGGLE, &mut cells, &mut finals, &mut meta[0]);
         assert_eq!(cells[door as usize], Object::DoorOpen as u8);
         while let Some(a) = t.next_action() {
-            env.step(a, &mut cells, &mut meta[0]);
+            env.step(a, &mut cells, &mut finals, &mut meta[0]);
             if t.advance(env.cell() as u32, meta[0].done()) != Progress::Continue {
                 break;
             }
@@ -396,6 +407,7 @@ mod tests {
         let (from, to) = (nodes[0], nodes[nodes.len() - 1]);
         let mut env = env_at(&layout, Task::MultiGoal, from, 0);
         let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
+        let mut finals = vec![0u8; layout.cells.len()];
         env.observe(&mut cells, &mut meta[0]);
         let mut t = Traversal::plan(
             &g,
@@ -410,7 +422,7 @@ mod tests {
         // A steering policy that only turns never reaches the first node.
         let mut steps = 0;
         loop {
-            env.step(sim::action::LEFT, &mut cells, &mut meta[0]);
+            env.step(sim::action::LEFT, &mut cells, &mut finals, &mut meta[0]);
             steps += 1;
             match t.advance(env.cell() as u32, false) {
                 Progress::Continue => assert!(steps < limit),
@@ -420,5 +432,66 @@ mod tests {
         }
         assert_eq!(steps, limit);
         assert_eq!(t.steps(), limit);
+    }
+
+    #[test]
+    fn a_traversal_whose_last_node_is_the_exit_arrives() {
+        // Same-step auto-reset: the step onto the exit ends the episode and
+        // the observation shows the next episode's start, but the record's
+        // end cell is the exit.
+        let layout = Maze::Small.layout(false);
+        let exit = layout
+            .cells
+            .iter()
+            .position(|&c| c == Object::Exit as u8)
+            .expect("an exit") as u32;
+        let from = layout.cell_index(8, 11) as u32;
+        let cfg = PlannerConfig {
+            candidates: CandidateSet::Given,
+            seed: 1,
+            walks_per_node: 256,
+            walk_len: 64,
+            task: Task::MultiGoal,
+            ..PlannerConfig::default()
+        };
+        let nodes = planner::pivotal::nodes_from_cells(&layout, &[from, exit]);
+        let g = WorldGraph::build(&layout, &cfg, &nodes).expect("graph");
+        let env_cfg = EnvConfig {
+            task: Task::MultiGoal,
+            max_steps: 1000,
+            balls: BallSpawn::Layout,
+            auto_reset: AutoReset::SameStep,
+        };
+        let mut env = Env::new(layout.clone(), env_cfg, 1, 0);
+        env.teleport(sim::Pose {
+            x: 8,
+            y: 11,
+            dir: 0,
+        });
+        let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
+        let mut finals = vec![0u8; layout.cells.len()];
+        env.observe(&mut cells, &mut meta[0]);
+        let mut route = Route::default();
+        let mut t = Traversal::plan(
+            &g,
+            &view(&layout, &cells, &meta),
+            0,
+            exit,
+            Execution::Replay,
+            &mut route,
+        )
+        .expect("a route to the exit");
+        loop {
+            let a = t.next_action().expect("an action while under way");
+            env.step(a, &mut cells, &mut finals, &mut meta[0]);
+            let end = meta[0].end_cell(layout.width) as u32;
+            match t.advance(end, meta[0].done()) {
+                Progress::Continue => assert!(!meta[0].done()),
+                Progress::Arrived => break,
+                Progress::Stopped => panic!("the route to the exit stopped"),
+            }
+        }
+        assert!(meta[0].terminated(), "the last step reached the exit");
+        assert_ne!(meta[0].cell(layout.width) as u32, exit, "the observation is the next start");
     }
 }

@@ -3,13 +3,50 @@
 //! within the horizon `c`" — by the Manager, not by the task.
 //!
 //! Per Worker step ([`WorkerGoal::book`]): the step penalty, plus the goal
-//! reward when the agent stands on `g_n`, or on `g_w` for the first time in
-//! the interval (the Feudal Worker has one goal, `g_w = g_n`). Reaching
-//! `g_n` ends the Worker's goal episode and the Manager's interval, and so
-//! do `c` Worker steps and the end of the environment's episode. Handing
-//! over to a world-graph traversal towards `g_w` also ends the goal episode,
-//! paid as reaching `g_w` (the route brings the agent there; the Worker
-//! resumes at `g_w` with a fresh goal episode for `g_n`).
+//! reward when the step *brings* the agent onto `g_n`, or onto `g_w` for
+//! the first time in the interval (the Feudal Worker has one goal,
+//! `g_w = g_n`). Arrival is judged on the cell the action led to — on the
+//! step that ends the environment's episode too, whose observation already
+//! shows the next episode's start ([`shm_schemas::EnvMeta::end_cell`]).
+//! A goal on the cell the agent stands on when it is set is not paid until
+//! the agent has left it and come back, so standing still (or turning)
+//! earns nothing. Reaching `g_n` ends the Worker's goal episode and the
+//! Manager's interval, and so do `c` Worker steps and the end of the
+//! environment's episode; a goal episode cut short by the episode's step
+//! limit (truncation) is bootstrapped from its final state
+//! ([`WorkerStep::bootstrap`]). Handing over to a world-graph traversal
+//! towards `g_w` also ends the goal episode, paid as reaching `g_w` (the
+//! route brings the agent there; the Worker resumes at `g_w` with a fresh
+//! goal episode for `g_n`).
+
+/// How the environment's episode stands after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EpisodeEnd {
+    /// The episode goes on.
+    Running,
+    /// The task's own rule ended it (the exit, lava).
+    Terminated,
+    /// The step limit ended it.
+    Truncated,
+}
+
+impl EpisodeEnd {
+    /// The end a step record reports.
+    pub fn of(meta: &shm_schemas::EnvMeta) -> EpisodeEnd {
+        if meta.terminated() {
+            EpisodeEnd::Terminated
+        } else if meta.truncated() {
+            EpisodeEnd::Truncated
+        } else {
+            EpisodeEnd::Running
+        }
+    }
+
+    /// The episode ended (either way).
+    pub fn ended(self) -> bool {
+        self != EpisodeEnd::Running
+    }
+}
 
 /// The Worker's goals in one environment's current interval.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,6 +59,9 @@ pub struct WorkerGoal {
     pub wide_paid: bool,
     /// Worker steps taken in this interval.
     pub steps: u32,
+    /// The cell the agent left last step (arrival means moving onto a
+    /// goal, not staying on it).
+    pub last_cell: u32,
 }
 
 /// What one Worker step earned.
@@ -35,53 +75,62 @@ pub struct WorkerStep {
     pub interval_over: bool,
     /// `g_n` was reached.
     pub reached: bool,
+    /// The goal episode was cut by the environment's step limit, not ended
+    /// by a goal, the horizon or the task: its target bootstraps from the
+    /// final state's value.
+    pub bootstrap: bool,
 }
 
 impl WorkerGoal {
-    /// A fresh interval with goals `(wide, narrow)`.
-    pub fn new(wide: u32, narrow: u32) -> WorkerGoal {
+    /// A fresh interval with goals `(wide, narrow)`, set while the agent
+    /// stands on `here`.
+    pub fn new(wide: u32, narrow: u32, here: u32) -> WorkerGoal {
         WorkerGoal {
             wide,
             narrow,
-            wide_paid: false,
+            // Standing on g_w already is not reaching it.
+            wide_paid: wide == here,
             steps: 0,
+            last_cell: here,
         }
     }
 
-    /// Books one Worker step that left the agent on `cell` (`episode_ended`:
-    /// the environment's episode ended with it, so its arrival cannot be
-    /// judged), with horizon `horizon`, goal reward `goal` and step penalty
-    /// `penalty`.
+    /// Books one Worker step whose action led the agent to `cell` (on the
+    /// step that ends the environment's episode: the finished episode's
+    /// final cell), with the episode's state `end`, horizon `horizon`, goal
+    /// reward `goal` and step penalty `penalty`.
     pub fn book(
         &mut self,
         cell: u32,
-        episode_ended: bool,
+        end: EpisodeEnd,
         horizon: u32,
         goal: f32,
         penalty: f32,
     ) -> WorkerStep {
         self.steps += 1;
-        if episode_ended {
-            return WorkerStep {
-                reward: penalty,
-                done: true,
-                interval_over: true,
-                reached: false,
-            };
-        }
-        let reached = cell == self.narrow;
-        let wide_now = cell == self.wide && !self.wide_paid;
+        let moved = cell != self.last_cell;
+        self.last_cell = cell;
+        let reached = moved && cell == self.narrow;
+        let wide_now = moved && cell == self.wide && !self.wide_paid;
         if wide_now {
             self.wide_paid = true;
         }
         let paid = reached || wide_now;
-        let over = reached || self.steps >= horizon;
+        let horizon_over = self.steps >= horizon;
+        let over = reached || horizon_over || end.ended();
         WorkerStep {
             reward: penalty + if paid { goal } else { 0.0 },
             done: over,
             interval_over: over,
             reached,
+            bootstrap: end == EpisodeEnd::Truncated && !reached && !horizon_over,
         }
+    }
+
+    /// Books a step the Worker did not take (a traversal's) that left the
+    /// agent on `cell`.
+    pub fn moved_to(&mut self, cell: u32) {
+        self.last_cell = cell;
     }
 
     /// Books a hand-over to a traversal towards `g_w` on the step just
@@ -98,48 +147,98 @@ impl WorkerGoal {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use EpisodeEnd::{Running, Terminated, Truncated};
 
     #[test]
     fn the_worker_is_paid_for_g_w_or_g_n_and_for_nothing_else() {
         let (goal, penalty, c) = (1.0, -0.01, 20);
-        // Wide-then-Narrow: g_w = 10, g_n = 12.
-        let mut g = WorkerGoal::new(10, 12);
-        let s = g.book(3, false, c, goal, penalty);
+        // Wide-then-Narrow: g_w = 10, g_n = 12, set on cell 2.
+        let mut g = WorkerGoal::new(10, 12, 2);
+        let s = g.book(3, Running, c, goal, penalty);
         assert_eq!((s.reward, s.done, s.interval_over), (penalty, false, false));
-        let s = g.book(10, false, c, goal, penalty);
+        let s = g.book(10, Running, c, goal, penalty);
         assert_eq!(s.reward, penalty + goal, "g_w is paid");
         assert!(!s.done, "reaching g_w does not end the interval");
-        let s = g.book(11, false, c, goal, penalty);
+        let s = g.book(11, Running, c, goal, penalty);
         assert_eq!(s.reward, penalty);
-        let s = g.book(10, false, c, goal, penalty);
+        let s = g.book(10, Running, c, goal, penalty);
         assert_eq!(s.reward, penalty, "g_w is paid once per interval");
-        let s = g.book(12, false, c, goal, penalty);
+        let s = g.book(12, Running, c, goal, penalty);
         assert_eq!(s.reward, penalty + goal, "g_n is paid");
-        assert!(s.done && s.interval_over && s.reached);
-        // Arriving with the episode's end earns nothing but the penalty.
-        let mut g = WorkerGoal::new(10, 12);
-        let s = g.book(12, true, c, goal, penalty);
-        assert_eq!(s.reward, penalty);
-        assert!(s.done && s.interval_over && !s.reached);
+        assert!(s.done && s.interval_over && s.reached && !s.bootstrap);
         // The horizon ends the interval unpaid.
-        let mut g = WorkerGoal::new(10, 12);
-        let steps: Vec<WorkerStep> = (0..c).map(|_| g.book(5, false, c, goal, penalty)).collect();
+        let mut g = WorkerGoal::new(10, 12, 2);
+        let steps: Vec<WorkerStep> = (0..c)
+            .map(|_| g.book(5, Running, c, goal, penalty))
+            .collect();
         assert!(steps[..c as usize - 1].iter().all(|s| !s.done));
         assert!(steps[c as usize - 1].interval_over);
-        assert!(steps.iter().all(|s| s.reward == penalty));
+        assert!(steps.iter().all(|s| s.reward == penalty && !s.bootstrap));
         // Feudal: one goal, paid once.
-        let mut g = WorkerGoal::new(7, 7);
-        let s = g.book(7, false, c, goal, penalty);
+        let mut g = WorkerGoal::new(7, 7, 2);
+        let s = g.book(7, Running, c, goal, penalty);
         assert_eq!(s.reward, penalty + goal);
         // A hand-over pays g_w unless it was paid already.
-        let mut g = WorkerGoal::new(10, 12);
-        let mut s = g.book(4, false, c, goal, penalty);
+        let mut g = WorkerGoal::new(10, 12, 2);
+        let mut s = g.book(4, Running, c, goal, penalty);
         g.hand_over(&mut s, goal);
         assert_eq!(s.reward, penalty + goal);
         assert!(s.done);
-        let mut s = g.book(10, false, c, goal, penalty);
+        let mut s = g.book(10, Running, c, goal, penalty);
         assert_eq!(s.reward, penalty, "g_w was paid at the hand-over");
         g.hand_over(&mut s, goal);
         assert_eq!(s.reward, penalty);
+    }
+
+    #[test]
+    fn a_goal_reached_on_the_step_that_ends_the_episode_is_paid() {
+        let (goal, penalty, c) = (1.0, -0.01, 20);
+        // g_n is the exit (cell 12): the step onto it terminates the
+        // episode, and the record's end cell is the exit.
+        let mut g = WorkerGoal::new(10, 12, 11);
+        let s = g.book(12, Terminated, c, goal, penalty);
+        assert_eq!(s.reward, penalty + goal, "arrival at the exit is paid");
+        assert!(s.done && s.interval_over && s.reached);
+        assert!(!s.bootstrap, "termination is not bootstrapped");
+        // g_w reached on a truncated step: paid, and the cut goal episode
+        // bootstraps.
+        let mut g = WorkerGoal::new(10, 12, 9);
+        let s = g.book(10, Truncated, c, goal, penalty);
+        assert_eq!(s.reward, penalty + goal);
+        assert!(s.done && s.interval_over && !s.reached && s.bootstrap);
+        // Missing on a terminated step (lava) ends the interval unpaid.
+        let mut g = WorkerGoal::new(10, 12, 9);
+        let s = g.book(8, Terminated, c, goal, penalty);
+        assert_eq!(s.reward, penalty);
+        assert!(s.done && !s.bootstrap);
+        // A truncation on the horizon's last step is the horizon's end.
+        let mut g = WorkerGoal::new(10, 12, 9);
+        let s = g.book(8, Truncated, 1, goal, penalty);
+        assert!(s.done && !s.bootstrap);
+    }
+
+    #[test]
+    fn a_goal_under_the_agent_is_paid_only_after_leaving_it() {
+        let (goal, penalty, c) = (1.0, -0.01, 20);
+        // g_n on the agent's own cell: a turn earns nothing.
+        let mut g = WorkerGoal::new(30, 5, 5);
+        let s = g.book(5, Running, c, goal, penalty);
+        assert_eq!(s.reward, penalty, "turning on the goal is not reaching it");
+        assert!(!s.done);
+        g.book(6, Running, c, goal, penalty);
+        let s = g.book(5, Running, c, goal, penalty);
+        assert_eq!(s.reward, penalty + goal, "coming back is");
+        assert!(s.reached);
+        // g_w under the agent counts as reached already.
+        let mut g = WorkerGoal::new(5, 9, 5);
+        assert!(g.wide_paid);
+        g.book(6, Running, c, goal, penalty);
+        let s = g.book(5, Running, c, goal, penalty);
+        assert_eq!(s.reward, penalty, "g_w is not paid for the start");
+        // A traversal's steps move the agent without booking.
+        let mut g = WorkerGoal::new(30, 9, 5);
+        g.moved_to(9);
+        let s = g.book(9, Running, c, goal, penalty);
+        assert_eq!(s.reward, penalty, "the Worker did not bring it there");
     }
 }
