@@ -14,7 +14,7 @@
 //! per seed) with the same results.
 
 use shm_schemas::EnvMeta;
-use sim::{BatchEnv, EnvConfig, Layout, SimError, StepBuffers};
+use sim::{BatchEnv, EnvConfig, EnvState, Layout, SimError, StepBuffers};
 
 /// One batch of observations, borrowed from the transport that produced it.
 #[derive(Debug, Clone, Copy)]
@@ -102,6 +102,19 @@ pub trait BatchEnvironment {
     /// Applies `actions[i]` to environment `i`; afterwards [`observe`](Self::observe)
     /// returns the next batch.
     fn step(&mut self, actions: &[u8]) -> Result<(), EnvError>;
+    /// Every environment's state, where the transport can save it (the
+    /// in-process simulator); `None` where it cannot (another process owns
+    /// the environments).
+    fn snapshot(&self) -> Option<Vec<EnvState>> {
+        None
+    }
+    /// Puts every environment back in a [`Self::snapshot`]'s state and
+    /// makes [`Self::observe`] return the observation it was in. Returns
+    /// false where the transport cannot.
+    fn restore(&mut self, states: &[EnvState]) -> Result<bool, EnvError> {
+        let _ = states;
+        Ok(false)
+    }
 }
 
 /// The simulator in this process.
@@ -169,5 +182,12 @@ impl BatchEnvironment for InProcess {
         self.batch.step(actions, self.buf.out());
         self.seq += 1;
         Ok(())
+    }
+    fn snapshot(&self) -> Option<Vec<EnvState>> {
+        Some(self.batch.snapshot())
+    }
+    fn restore(&mut self, states: &[EnvState]) -> Result<bool, EnvError> {
+        self.batch.restore(states, self.buf.out())?;
+        Ok(true)
     }
 }

@@ -8,13 +8,12 @@
 //! weights. This crate therefore keeps the global generator to weight
 //! initialisation only, under one lock ([`init_seeded`]), and draws every
 //! training-time random number (HardKuma noise, sampled actions) from a
-//! [`SmallRng`] owned by the model that uses it ([`uniform_like`],
+//! [`SmallRng`](rand::rngs::SmallRng) owned by the model that uses it ([`uniform_like`],
 //! [`sample_categorical`]).
 
 use std::sync::Mutex;
 
 use rand::Rng;
-use rand::rngs::SmallRng;
 use tch::{Kind, Tensor};
 
 /// Serialises `manual_seed` + initialisation across threads.
@@ -34,7 +33,7 @@ pub fn init_seeded<T>(seed: u64, init: impl FnOnce() -> T) -> T {
 
 /// A tensor shaped and typed like `like`, filled with independent draws from
 /// `U(low, high)` taken from `rng`.
-pub fn uniform_like(rng: &mut SmallRng, like: &Tensor, low: f64, high: f64) -> Tensor {
+pub fn uniform_like(rng: &mut impl Rng, like: &Tensor, low: f64, high: f64) -> Tensor {
     let n = like.numel();
     let values: Vec<f64> = (0..n).map(|_| rng.random_range(low..high)).collect();
     Tensor::from_slice(&values)
@@ -45,7 +44,7 @@ pub fn uniform_like(rng: &mut SmallRng, like: &Tensor, low: f64, high: f64) -> T
 
 /// One draw per row of `probs` (`[B, A]` rows of probabilities) by inverse
 /// CDF with `rng`, or each row's argmax when `greedy`.
-pub fn sample_categorical(rng: &mut SmallRng, probs: &Tensor, greedy: bool) -> Vec<u8> {
+pub fn sample_categorical(rng: &mut impl Rng, probs: &Tensor, greedy: bool) -> Vec<u8> {
     let num_actions = probs.size()[1] as usize;
     let flat: Vec<f32> = tch::no_grad(|| Vec::try_from(probs.to_kind(Kind::Float).flatten(0, -1)))
         .expect("invariant: probabilities convert to a float vector");
@@ -72,7 +71,7 @@ pub fn sample_categorical(rng: &mut SmallRng, probs: &Tensor, greedy: bool) -> V
 
 /// One draw per row of `probs` (`[B, A]`) by inverse CDF with `rng`, as
 /// an index (for choice sets larger than 256: a Manager's subgoal cells).
-pub fn sample_index(rng: &mut SmallRng, probs: &Tensor) -> Vec<usize> {
+pub fn sample_index(rng: &mut impl Rng, probs: &Tensor) -> Vec<usize> {
     let width = probs.size()[1] as usize;
     let flat: Vec<f32> =
         tch::no_grad(|| Vec::try_from(probs.to_kind(Kind::Float).contiguous().flatten(0, -1)))
@@ -97,6 +96,7 @@ pub fn sample_index(rng: &mut SmallRng, probs: &Tensor) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use rand::SeedableRng;
+    use rand::rngs::SmallRng;
 
     use super::*;
 

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use shm_schemas::EnvMeta;
 
 use crate::SimError;
-use crate::env::{Env, EnvConfig, Shared};
+use crate::env::{Env, EnvConfig, EnvState, Shared};
 use crate::layout::Layout;
 
 /// Output buffers of one batch step (or reset).
@@ -168,6 +168,36 @@ impl BatchEnv {
         &self.envs[i]
     }
 
+    /// Every environment's state ([`Env::snapshot`]).
+    pub fn snapshot(&self) -> Vec<EnvState> {
+        self.envs.iter().map(Env::snapshot).collect()
+    }
+
+    /// Puts every environment back in its saved state and writes the
+    /// observation it was in (grid and agent; the step fields cleared).
+    pub fn restore(&mut self, states: &[EnvState], out: StepOut<'_>) -> Result<(), SimError> {
+        self.check(&out);
+        if states.len() != self.len() {
+            return Err(SimError::Config(format!(
+                "{} saved environments for a batch of {}",
+                states.len(),
+                self.len()
+            )));
+        }
+        let cpe = self.cells_per_env;
+        for (((env, state), cells), meta) in self
+            .envs
+            .iter_mut()
+            .zip(states)
+            .zip(out.cells.chunks_mut(cpe))
+            .zip(out.meta.iter_mut())
+        {
+            env.restore(state)?;
+            env.observe(cells, meta);
+        }
+        Ok(())
+    }
+
     /// Owned buffers of the right size for this batch.
     pub fn buffers(&self) -> StepBuffers {
         StepBuffers::new(self.len(), self.cells_per_env)
@@ -252,4 +282,42 @@ fn step_chunk(
         ended += usize::from(m.done());
     }
     ended
+}
+
+#[cfg(test)]
+mod snapshot_tests {
+    use super::*;
+    use crate::{Maze, Task};
+
+    #[test]
+    fn a_restored_batch_continues_exactly_where_the_snapshot_was_taken() {
+        for task in [Task::MultiGoal, Task::MultiGoalStochastic, Task::DoorKey] {
+            let layout = Maze::Small.layout(task == Task::DoorKey);
+            let mut cfg = EnvConfig::for_task(task, &layout);
+            cfg.max_steps = 40;
+            let mut a = BatchEnv::new(layout.clone(), cfg, 6, 9, 1).expect("batch");
+            let mut buf = a.buffers();
+            a.reset(buf.out());
+            let actions = |t: usize| -> Vec<u8> {
+                (0..6)
+                    .map(|i| ((i * 5 + t * 7) % task.num_actions()) as u8)
+                    .collect()
+            };
+            for t in 0..57 {
+                a.step(&actions(t), buf.out());
+            }
+            let saved = a.snapshot();
+            // A batch of another seed, put back in the saved states.
+            let mut b = BatchEnv::new(layout, cfg, 6, 1234, 1).expect("batch");
+            let mut restored = b.buffers();
+            b.restore(&saved, restored.out()).expect("restore");
+            assert_eq!(buf.cells, restored.cells, "{task:?}: the observation");
+            for t in 57..200 {
+                a.step(&actions(t), buf.out());
+                b.step(&actions(t), restored.out());
+                assert_eq!(buf.cells, restored.cells, "{task:?}: step {t}");
+                assert_eq!(buf.meta, restored.meta, "{task:?}: step {t}");
+            }
+        }
+    }
 }

@@ -39,13 +39,13 @@
 
 use std::sync::Arc;
 
-use rand::rngs::SmallRng;
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 use shm_schemas::{EnvMeta, flags};
 
 use crate::layout::{Layout, Pose};
 use crate::object::Object;
+use crate::rng::{ReplayRng, RngState};
 use crate::task::{DEFAULT_BALLS, LAVA_PENALTY, STEP_PENALTY, Task};
 
 /// Action codes, MiniGrid numbering.
@@ -149,6 +149,23 @@ pub fn env_seed(seed: u64, index: u64) -> u64 {
     splitmix(splitmix(seed) ^ index.wrapping_mul(0xD6E8_FEB8_6659_FD93))
 }
 
+/// The saved state of one environment ([`Env::snapshot`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnvState {
+    grid: Vec<u8>,
+    pos: u32,
+    dir: u8,
+    carrying: u8,
+    rng: RngState,
+    t: u32,
+    episode_return: f32,
+    balls: u8,
+    balls_spawned: u8,
+    door_opened: bool,
+    lava: u32,
+    done_flags: u8,
+}
+
 /// Static data shared by all environments of a batch.
 #[derive(Debug)]
 pub(crate) struct Shared {
@@ -190,7 +207,7 @@ pub struct Env {
     pos: usize,
     dir: u8,
     carrying: u8,
-    rng: SmallRng,
+    rng: ReplayRng,
     t: u32,
     episode_return: f32,
     balls: u8,
@@ -214,7 +231,7 @@ impl Env {
             pos: 0,
             dir: 0,
             carrying: NOTHING,
-            rng: SmallRng::seed_from_u64(env_seed(seed, index)),
+            rng: ReplayRng::seed_from_u64(env_seed(seed, index)),
             t: 0,
             episode_return: 0.0,
             balls: 0,
@@ -275,6 +292,53 @@ impl Env {
     /// True when an episode ended and (with [`AutoReset::Off`]) no reset followed.
     pub fn is_done(&self) -> bool {
         self.done_flags != 0
+    }
+
+    /// Everything that decides this environment's future: the grid, the
+    /// agent, the episode's figures and the RNG's state. A training run
+    /// saves it with its checkpoint, so that it resumes mid-episode exactly
+    /// where it stopped ([`Env::restore`]).
+    pub fn snapshot(&self) -> EnvState {
+        EnvState {
+            grid: self.grid.clone(),
+            pos: self.pos as u32,
+            dir: self.dir,
+            carrying: self.carrying,
+            rng: self.rng.state(),
+            t: self.t,
+            episode_return: self.episode_return,
+            balls: self.balls,
+            balls_spawned: self.balls_spawned,
+            door_opened: self.door_opened,
+            lava: self.lava,
+            done_flags: self.done_flags,
+        }
+    }
+
+    /// Puts the environment back in `state` (from [`Env::snapshot`] of an
+    /// environment on the same layout).
+    pub fn restore(&mut self, state: &EnvState) -> Result<(), crate::SimError> {
+        if state.grid.len() != self.grid.len() || state.pos as usize >= self.grid.len() {
+            return Err(crate::SimError::Config(format!(
+                "a saved environment of {} cells (agent at {}) does not fit this layout of {} cells",
+                state.grid.len(),
+                state.pos,
+                self.grid.len()
+            )));
+        }
+        self.grid.copy_from_slice(&state.grid);
+        self.pos = state.pos as usize;
+        self.dir = state.dir & 3;
+        self.carrying = state.carrying;
+        self.rng = ReplayRng::from_state(state.rng);
+        self.t = state.t;
+        self.episode_return = state.episode_return;
+        self.balls = state.balls;
+        self.balls_spawned = state.balls_spawned;
+        self.door_opened = state.door_opened;
+        self.lava = state.lava;
+        self.done_flags = state.done_flags;
+        Ok(())
     }
 
     /// Places the agent at `pose` (its cell must be one the agent can stand

@@ -35,12 +35,14 @@ mod error;
 pub mod layout;
 pub mod object;
 pub mod render;
+pub mod rng;
 pub mod task;
 
 pub use batch::{BatchEnv, StepBuffers, StepOut};
-pub use env::{AutoReset, BallSpawn, Env, EnvConfig, action, env_seed, minigrid_encode};
+pub use env::{AutoReset, BallSpawn, Env, EnvConfig, EnvState, action, env_seed, minigrid_encode};
 pub use error::SimError;
 pub use layout::{Layout, LayoutError, LayoutErrorKind, Maze, Pose};
 pub use object::Object;
+pub use rng::{ReplayRng, RngState};
 pub use shm_schemas::{EnvMeta, flags};
 pub use task::Task;

@@ -127,7 +127,7 @@ pub enum FirstLayer {
 /// A batch of observations in the compact form the first convolution
 /// reads (module docs): each cell's object channel, the agent's cell and
 /// facing, whether the key is carried, and the goal cells.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct CellInput {
     width: usize,
     height: usize,

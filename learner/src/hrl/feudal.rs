@@ -70,7 +70,7 @@ pub enum ManagerHead {
 }
 
 /// One Manager decision and its interval.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Decision {
     /// The observation it was taken on (one observation).
     pub input: CellInput,
@@ -99,7 +99,7 @@ pub struct Decision {
 
 /// One environment's decisions not yet trained, oldest first, and the
 /// Manager's core state before the first of them.
-#[derive(Debug)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DecisionQueue {
     /// The decisions; the last one is the interval under way.
     pub decisions: Vec<Decision>,

@@ -32,11 +32,9 @@ pub mod worker;
 use std::path::Path;
 
 use planner::{Route, WorldGraph};
-use rand::SeedableRng;
-use rand::rngs::SmallRng;
 use serde::{Deserialize, Serialize};
 use shm_schemas::EnvMeta;
-use sim::{Layout, Task, action};
+use sim::{Layout, ReplayRng, RngState, Task, action};
 use tch::{Device, Tensor, nn};
 
 use crate::a2c::input::{CellInput, GOAL_CHANNEL, GoalMarks, NO_GOAL, goal_planes, mask};
@@ -277,7 +275,7 @@ impl WorldGraphInputs {
 }
 
 /// One environment's hierarchical state.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 struct EnvCtl {
     need_decision: bool,
     /// Reset the Manager's core before its next decision.
@@ -296,7 +294,16 @@ struct Controller {
     envs: Vec<EnvCtl>,
     queues: Vec<DecisionQueue>,
     manager_init: Option<LstmState>,
-    rng: SmallRng,
+    rng: ReplayRng,
+}
+
+/// What of a [`Controller`] is not a tensor, as saved with a training
+/// checkpoint ([`HrlAgent::save_controller`]).
+#[derive(Debug, Serialize, Deserialize)]
+struct ControllerRecord {
+    envs: Vec<EnvCtl>,
+    queues: Vec<DecisionQueue>,
+    rng: RngState,
 }
 
 /// What one iteration measured.
@@ -575,7 +582,7 @@ impl HrlAgent {
                 envs: Vec::new(),
                 queues: Vec::new(),
                 manager_init: None,
-                rng: SmallRng::seed_from_u64(seed),
+                rng: ReplayRng::seed_from_u64(seed),
             },
             seed,
             route: Route::with_capacity(1024, 64),
@@ -646,13 +653,103 @@ impl HrlAgent {
                 })
                 .collect(),
             manager_init: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
-            rng: SmallRng::seed_from_u64(seed),
+            rng: ReplayRng::seed_from_u64(seed),
         }
+    }
+
+    /// The training controller — core states, goals, traversals, the
+    /// Manager's decision queues and the action RNG — as a record (JSON)
+    /// and a tensor file. Saved with a checkpoint beside the environments'
+    /// states, it lets a run resume mid-episode exactly where it stopped,
+    /// so that neither validation nor a crash perturbs training.
+    pub fn save_controller(&self) -> Result<(Vec<u8>, Vec<u8>), LearnerError> {
+        let c = &self.ctl;
+        let record = ControllerRecord {
+            envs: c.envs.clone(),
+            queues: c.queues.clone(),
+            rng: c.rng.state(),
+        };
+        let json = serde_json::to_vec(&record).map_err(|e| LearnerError::Checkpoint {
+            path: "controller".into(),
+            message: e.to_string(),
+        })?;
+        let mut named: Vec<(String, &Tensor)> = Vec::new();
+        for (name, s) in [
+            ("worker", Some(&c.worker_state)),
+            ("manager", c.manager_state.as_ref()),
+            ("steer", c.steer_state.as_ref()),
+            ("manager_init", c.manager_init.as_ref()),
+        ] {
+            if let Some(s) = s {
+                named.push((format!("{name}/h"), &s.h));
+                named.push((format!("{name}/c"), &s.c));
+            }
+        }
+        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), *t)).collect();
+        let mut tensors = Vec::new();
+        Tensor::save_multi_to_stream(&refs, &mut tensors)?;
+        Ok((json, tensors))
+    }
+
+    /// Restores [`Self::save_controller`]'s record and tensors (of an agent
+    /// of the same configuration and batch); `source` names them in errors.
+    pub fn load_controller(
+        &mut self,
+        json: &[u8],
+        tensors: &[u8],
+        source: &Path,
+    ) -> Result<(), LearnerError> {
+        let bad = |message: String| LearnerError::Checkpoint {
+            path: source.display().to_string(),
+            message,
+        };
+        let record: ControllerRecord =
+            serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
+        if record.envs.len() != self.cfg.envs || record.queues.len() != self.cfg.envs {
+            return Err(bad(format!(
+                "a controller of {} environments, the agent has {}",
+                record.envs.len(),
+                self.cfg.envs
+            )));
+        }
+        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(tensors))
+            .map_err(|e| bad(e.to_string()))?;
+        let state = |name: &str| -> Result<Option<LstmState>, LearnerError> {
+            let find = |k: String| loaded.iter().find(|(n, _)| *n == k).map(|(_, t)| t.copy());
+            match (find(format!("{name}/h")), find(format!("{name}/c"))) {
+                (Some(h), Some(c)) => Ok(Some(LstmState { h, c })),
+                (None, None) => Ok(None),
+                _ => Err(bad(format!("half a core state {name}"))),
+            }
+        };
+        let worker = state("worker")?.ok_or_else(|| bad("no Worker core state".into()))?;
+        let (manager, steer, manager_init) =
+            (state("manager")?, state("steer")?, state("manager_init")?);
+        if manager.is_some() != self.manager.is_some()
+            || worker.h.size() != self.ctl.worker_state.h.size()
+        {
+            return Err(bad("the controller is of another agent".into()));
+        }
+        self.ctl = Controller {
+            worker_state: worker,
+            manager_state: manager,
+            steer_state: steer.or_else(|| self.ctl.steer_state.take()),
+            envs: record.envs,
+            queues: record.queues,
+            manager_init,
+            rng: ReplayRng::from_state(record.rng),
+        };
+        Ok(())
     }
 
     /// Starts training segment `segment`: every environment starts a new
     /// episode, and the core states, goals and the action RNG start afresh
-    /// from `(seed, segment)`.
+    /// from `(seed, segment)`. A run calls it once, at its start (segment
+    /// 0); between segments training goes on where it was (validation uses
+    /// environments and a controller of its own), and a resumed run
+    /// restores its controller ([`Self::load_controller`]) — where the
+    /// environments' states cannot be restored (another process owns them),
+    /// it starts the segment afresh instead.
     pub fn start_segment(
         &mut self,
         env: &mut dyn BatchEnvironment,
@@ -1119,9 +1216,10 @@ impl HrlAgent {
                 && !cut_manager.is_empty()
             {
                 let state = ctl.manager_state.as_ref().expect("a Manager has a state");
-                for (&e, v) in cut_manager
-                    .iter()
-                    .zip(manager.final_values(&obs, state, &cut_manager))
+                for (&e, v) in
+                    cut_manager
+                        .iter()
+                        .zip(manager.final_values(&obs, state, &cut_manager))
                 {
                     if let Some(q) = ctl.queues[e].decisions.last_mut() {
                         q.final_value = Some(v);
@@ -1455,4 +1553,125 @@ struct StepCounts {
     intervals: usize,
     reached: usize,
     traversal_steps: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::batch_env::{EnvError, InProcess};
+    use sim::{AutoReset, BallSpawn, EnvConfig};
+
+    /// A batch environment that keeps every step record it produced.
+    struct Recorder {
+        env: InProcess,
+        steps: Vec<Vec<EnvMeta>>,
+    }
+
+    impl BatchEnvironment for Recorder {
+        fn num_envs(&self) -> usize {
+            self.env.num_envs()
+        }
+        fn num_actions(&self) -> usize {
+            self.env.num_actions()
+        }
+        fn observe(&self) -> ObsView<'_> {
+            self.env.observe()
+        }
+        fn step(&mut self, actions: &[u8]) -> Result<(), EnvError> {
+            self.env.step(actions)?;
+            self.steps.push(self.env.observe().meta.to_vec());
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_truncated_step_is_bootstrapped_and_a_terminated_one_is_not() {
+        // A corridor whose exit is two moves away and a step limit of 3:
+        // random actions end episodes both ways.
+        let layout = Layout::parse("corridor", "#####\n#>.E#\n#####\n").expect("layout");
+        let env_cfg = EnvConfig {
+            task: Task::MultiGoal,
+            max_steps: 3,
+            balls: BallSpawn::Layout,
+            auto_reset: AutoReset::SameStep,
+        };
+        let cfg = AgentConfig {
+            kind: AgentKind::A2c,
+            envs: 8,
+            rollout_len: 12,
+            hidden: 16,
+            conv_channels: [4, 8],
+            ..AgentConfig::default()
+        };
+        let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 1).expect("agent");
+        let mut env = Recorder {
+            env: InProcess::new(layout.clone(), env_cfg, 8, 2, 1).expect("env"),
+            steps: Vec::new(),
+        };
+        agent.start_segment(&mut env, 0).expect("segment");
+        env.steps.clear();
+        // Keep the rollout: the update does not clear it.
+        agent.train_iteration(&mut env).expect("iteration");
+        let (mut terminated, mut truncated) = (0, 0);
+        let gamma = cfg.worker.gamma as f32;
+        for (t, metas) in env.steps.iter().enumerate() {
+            for (e, m) in metas.iter().enumerate() {
+                let i = t * 8 + e;
+                let (booked, done) = (agent.rollout.rewards[i], agent.rollout.dones[i]);
+                if m.terminated() {
+                    terminated += 1;
+                    assert_eq!(booked, m.reward, "a terminated step is not bootstrapped");
+                    assert_eq!(done, 1.0);
+                } else if m.truncated() {
+                    truncated += 1;
+                    let bootstrap = booked - m.reward;
+                    assert!(
+                        bootstrap.abs() > 1e-6 && bootstrap.abs() <= gamma * 10.0,
+                        "a truncated step adds γ·V(s_final), got {bootstrap}"
+                    );
+                    assert_eq!(done, 1.0, "nothing flows back from the next episode");
+                } else {
+                    assert_eq!(booked, m.reward);
+                    assert_eq!(done, 0.0);
+                }
+            }
+        }
+        assert!(
+            terminated > 0 && truncated > 0,
+            "{terminated} / {truncated}"
+        );
+    }
+
+    #[test]
+    fn the_wide_narrow_worker_sees_which_goal_is_which() {
+        let goals = [WorkerGoal::new(5, 9, 1), WorkerGoal::new(9, 5, 1)];
+        let marks = worker_goal_marks(AgentKind::WideNarrow, goals.iter());
+        assert_eq!(marks, vec![5, 9, 9, 5]);
+        let layout = sim::Maze::Small.layout(false);
+        let (cells, meta) = (layout.cells.repeat(2), vec![EnvMeta::EMPTY; 2]);
+        let obs = ObsView {
+            seq: 0,
+            cells: &cells,
+            final_cells: &[],
+            meta: &meta,
+            width: layout.width,
+            height: layout.height,
+        };
+        let dense = crate::a2c::input::encode_obs(
+            &obs,
+            Some(GoalMarks {
+                cells: &marks,
+                per_env: 2,
+            }),
+        );
+        assert!(
+            !dense.get(0).equal(&dense.get(1)),
+            "swapping g_w and g_n changes the Worker's input"
+        );
+        // Once g_w is paid its mark goes.
+        let mut paid = WorkerGoal::new(5, 9, 1);
+        paid.wide_paid = true;
+        let marks = worker_goal_marks(AgentKind::WideNarrow, std::iter::once(&paid));
+        assert_eq!(marks, vec![NO_GOAL, 9]);
+    }
 }

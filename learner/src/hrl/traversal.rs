@@ -26,7 +26,7 @@ use sim::Object;
 use crate::batch_env::ObsView;
 
 /// How a route is executed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Execution {
     /// Replay the edges' recorded actions (deterministic tasks).
     Replay,
@@ -53,7 +53,7 @@ pub enum Progress {
 }
 
 /// One traversal under way.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Traversal {
     execution: Execution,
     /// The target cell `g_w`.
@@ -296,7 +296,7 @@ mod tests {
                 for &to in &nodes {
                     let mut env = env_at(&layout, Task::MultiGoal, from, (from % 4) as u8);
                     let (mut cells, mut meta) = (vec![0u8; layout.cells.len()], [EnvMeta::EMPTY]);
-        let mut finals = vec![0u8; layout.cells.len()];
+                    let mut finals = vec![0u8; layout.cells.len()];
                     env.observe(&mut cells, &mut meta[0]);
                     let t = Traversal::plan(
                         &g,
@@ -492,6 +492,10 @@ mod tests {
             }
         }
         assert!(meta[0].terminated(), "the last step reached the exit");
-        assert_ne!(meta[0].cell(layout.width) as u32, exit, "the observation is the next start");
+        assert_ne!(
+            meta[0].cell(layout.width) as u32,
+            exit,
+            "the observation is the next start"
+        );
     }
 }

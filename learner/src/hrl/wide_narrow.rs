@@ -96,8 +96,7 @@ impl Window {
             i64::from(cell) % w - i64::from(centre) % w,
             i64::from(cell) / w - i64::from(centre) / w,
         );
-        (dx.abs() <= r && dy.abs() <= r)
-            .then(|| ((dy + r) * self.side as i64 + dx + r) as usize)
+        (dx.abs() <= r && dy.abs() <= r).then(|| ((dy + r) * self.side as i64 + dx + r) as usize)
     }
 
     /// Which window slots around `centre` are valid narrow goals: inside the
@@ -458,7 +457,10 @@ mod tests {
         let vs = nn::VarStore::new(Device::Cpu);
         let head = crate::seeding::init_seeded(3, || WideNarrowHead::new(&vs.root(), 8, 5, 9));
         let h = Tensor::randn([1, 8], (Kind::Float, Device::Cpu)).repeat([2, 1]);
-        let local = Tensor::zeros([2, (9 * WINDOW_CHANNELS) as i64], (Kind::Float, Device::Cpu));
+        let local = Tensor::zeros(
+            [2, (9 * WINDOW_CHANNELS) as i64],
+            (Kind::Float, Device::Cpu),
+        );
         let valid = Tensor::ones([2, 9], (Kind::Bool, Device::Cpu));
         let p = head
             .narrow(&h, &Tensor::from_slice(&[0i64, 4]), &local, &valid)

@@ -49,7 +49,7 @@ impl EpisodeEnd {
 }
 
 /// The Worker's goals in one environment's current interval.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WorkerGoal {
     /// The wide goal `g_w` (FN: the subgoal).
     pub wide: u32,
