@@ -17,9 +17,10 @@
 //! ([`crate::a2c`]): the Worker (or the baseline) learns from `[T, B]`
 //! rollouts, the Manager from its decision queues.
 //!
-//! Training runs in *segments* ([`HrlAgent::start_segment`]): a segment
-//! starts from fresh episodes and RNGs seeded by `(seed, segment)`, so a
-//! run checkpointed between segments resumes exactly.
+//! A run starts its training stream once ([`HrlAgent::start_segment`]) and
+//! carries it across validations; a checkpoint saves the controller
+//! ([`HrlAgent::save_controller`]) beside the environments' states, so a
+//! resumed run goes on exactly where it stopped.
 
 pub mod a2c;
 pub mod feudal;
