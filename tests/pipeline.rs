@@ -513,3 +513,160 @@ fn a_restarted_sim_is_a_new_stream_not_a_reordering() {
     );
     assert_eq!(report["stream"]["sim_restarts"], 1, "{report}");
 }
+
+/// Issue 24 over the transport: the real sim process steps its
+/// environments into loaned samples; the test, as the learner, answers with
+/// chosen actions and finds every record, the cells and, on the steps that
+/// ended an episode, the end pose and the final cells equal to the same
+/// environments stepped in this process (same layout, seed and actions).
+#[test]
+fn the_final_state_of_an_ending_step_crosses_shared_memory_as_stepped_in_process() {
+    use iceoryx2::prelude::ipc;
+    use shm_schemas::ObsShape;
+    use shm_schemas::service::{PipelineNode, RunName, run_config};
+    use sim::action::{FORWARD, LEFT, RIGHT};
+    use sim::{AutoReset, BallSpawn, BatchEnv, EnvConfig, Layout, Object, Task};
+
+    // Env 0 of each slice walks over the balls onto the exit (ends every 4
+    // steps), env 1 turns (truncated every 9), the others wander.
+    const TEXT: &str = "#######\n#>B.BE#\n#.....#\n#######\n";
+    const MAX_STEPS: u32 = 9;
+    const SEED: u64 = 3;
+    const SAMPLES: u64 = 160;
+    let (envs, slices) = (8usize, 2usize);
+    let dir = tempfile::tempdir().unwrap();
+    let run = run_name("finalstate");
+    let d = dir.path().to_str().unwrap();
+    let layout_file = dir.path().join("corridor.txt");
+    std::fs::write(&layout_file, TEXT).unwrap();
+
+    let layout = Layout::parse("corridor", TEXT).unwrap();
+    let cfg = EnvConfig {
+        task: Task::MultiGoal,
+        max_steps: MAX_STEPS,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::SameStep,
+    };
+    let shape = ObsShape::sliced(envs, slices, layout.width, layout.height).unwrap();
+    let per = shape.envs();
+    let mut refs: Vec<BatchEnv> = (0..slices)
+        .map(|k| BatchEnv::with_first_index(layout.clone(), cfg, k * per, per, SEED, 1).unwrap())
+        .collect();
+    let mut bufs: Vec<_> = refs.iter().map(BatchEnv::buffers).collect();
+    let cpe = refs[0].cells_per_env();
+
+    // The learner's ports exist before the sim starts: nothing is missed.
+    let name = RunName::new(&run).unwrap();
+    let learner = PipelineNode::<ipc::Service>::new(&run_config(&name).unwrap(), name, "learner")
+        .unwrap()
+        .with_task(cfg.task.name(), cfg.task.num_actions());
+    let obs = learner.obs_subscriber(shape).unwrap();
+    let act = learner.act_publisher(per).unwrap();
+    let mut sim = role(
+        dir.path(),
+        "sim.log",
+        &[
+            "sim",
+            "serve",
+            "--run",
+            &run,
+            "--run-dir",
+            d,
+            "--layout",
+            layout_file.to_str().unwrap(),
+            "--task",
+            cfg.task.name(),
+            "--seed",
+            &SEED.to_string(),
+            "--max-steps",
+            &MAX_STEPS.to_string(),
+            "--envs",
+            &envs.to_string(),
+            "--slices",
+            &slices.to_string(),
+        ],
+    );
+
+    let mut rng = 0x9E37_79B9_7F4A_7C15u64;
+    let mut sent = vec![Vec::new(); slices];
+    let (mut terminated, mut truncated) = (0, 0);
+    for seq in 0..SAMPLES {
+        let until = Instant::now() + Duration::from_secs(30);
+        let sample = loop {
+            if let Some(s) = obs.receive().unwrap() {
+                break s;
+            }
+            assert!(
+                Instant::now() < until && matches!(sim.try_wait(), Ok(None)),
+                "no sample {seq}: {}",
+                std::fs::read_to_string(dir.path().join("sim.log")).unwrap_or_default()
+            );
+            std::thread::sleep(Duration::from_micros(50));
+        };
+        let b = sample.batch();
+        assert_eq!(b.header.seq, seq);
+        let k = (seq % slices as u64) as usize;
+        if seq < slices as u64 {
+            refs[k].reset(bufs[k].out());
+        } else {
+            refs[k].step(&sent[k], bufs[k].out());
+        }
+        let r = &bufs[k];
+        assert_eq!(b.meta, &r.meta[..], "records of sample {seq}");
+        assert_eq!(b.cells, &r.cells[..], "cells of sample {seq}");
+        for (i, m) in b.meta.iter().enumerate() {
+            if !m.done() {
+                assert_eq!(
+                    (m.end_x, m.end_y, m.end_dir, m.end_carrying),
+                    (m.x, m.y, m.dir, m.carrying)
+                );
+                continue;
+            }
+            let (finals, ours) = (
+                &b.final_cells[i * cpe..(i + 1) * cpe],
+                &r.final_cells[i * cpe..(i + 1) * cpe],
+            );
+            assert_eq!(finals, ours, "final cells of env {i} in sample {seq}");
+            if m.terminated() {
+                terminated += 1;
+                assert_eq!(layout.cells[m.end_cell(layout.width)], Object::Exit as u8);
+                assert_eq!(m.cell(layout.width), layout.width + 1, "back at the start");
+                if m.balls == 2 {
+                    assert_ne!(
+                        finals,
+                        &b.cells[i * cpe..(i + 1) * cpe],
+                        "the balls were collected"
+                    );
+                }
+            }
+            truncated += usize::from(m.truncated());
+        }
+        drop(sample);
+        let actions: Vec<u8> = (0..per)
+            .map(|i| match i {
+                0 => FORWARD,
+                1 => LEFT,
+                _ => {
+                    rng ^= rng << 13;
+                    rng ^= rng >> 7;
+                    rng ^= rng << 17;
+                    [LEFT, RIGHT, FORWARD, FORWARD][(rng % 4) as usize]
+                }
+            })
+            .collect();
+        act.send_actions(seq, &actions).unwrap();
+        sent[k] = actions;
+    }
+    // 79 steps per slice: env 0 ends every 4, env 1 every 9.
+    assert!(terminated >= 2 * 19, "{terminated} terminations");
+    assert!(truncated >= 2 * 8, "{truncated} truncations");
+
+    drop((obs, act, learner));
+    sigterm(&sim);
+    assert!(wait_exit(&mut sim, Duration::from_secs(20)).success());
+    assert!(
+        wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()),
+        "left behind: {:?}",
+        shm_files(&run)
+    );
+}

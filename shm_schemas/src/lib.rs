@@ -6,17 +6,19 @@
 //! they share over iceoryx2 shared memory (README.md, "The pipeline"):
 //!
 //! ```text
-//!   sim ── wg/<run>/obs  (ObsHeader + [EnvMeta; N] + N×H×W cells) ──► learner, planner
+//!   sim ── wg/<run>/obs  (ObsHeader + [EnvMeta; N] + N×H×W cells + N×H×W final cells) ──► learner, planner
 //!   sim ◄─ wg/<run>/act  (ActHeader + N action bytes) ─────────────── learner
 //!   learner ── wg/<run>/route (RouteRequest → RouteResponse) ──► planner
 //!   planner ── wg/<run>/graph (GraphHeader + nodes + edges, latest only) ──► learner, viewers
 //! ```
 //!
 //! - [`ObsHeader`]: the observation batch. [`EnvMeta`] is the
-//!   per-environment record; [`ObsShape`] the run's batch and grid size;
+//!   per-environment record (with the pose a step's action led to, before
+//!   any auto-reset); [`ObsShape`] the run's batch and grid size;
 //!   [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,
-//!   &mut [EnvMeta], &mut [u8])` so the simulator steps straight into shared
-//!   memory; [`ObsBatch`] is the zero-copy read view.
+//!   &mut [EnvMeta], cells, final cells)` so the simulator steps straight
+//!   into shared memory; [`ObsBatch`] is the zero-copy read view. The final
+//!   cells hold the grid an episode ended on, for the steps that ended one.
 //! - [`ActHeader`], [`ActBatch`], [`ActBatchMut`]: the action batch.
 //! - [`RouteRequest`], [`RouteResponse`], [`RouteStatus`]: route queries.
 //! - [`GraphHeader`], [`GraphEdge`], [`GraphSnapshot`]: graph snapshots.
@@ -36,7 +38,7 @@
 //!
 //! Every wire type is `#[repr(C)]`, [`bytemuck::Pod`] (no padding, checked
 //! at compile time), `ZeroCopySend` with a versioned type name
-//! (`wg.ObsHeader.v2`), with its size asserted at compile time. The only
+//! (`wg.ObsHeader.v3`), with its size asserted at compile time. The only
 //! `unsafe` code of the workspace's IPC path lives in one private module
 //! (`raw.rs`), each block justified.
 //!

@@ -8,7 +8,7 @@
 //! payload      [u64] of payload_words()    viewed as bytes:
 //!   [0, 28·N)                               N × EnvMeta            (align 4)
 //!   [cells_offset, cells_offset + N·H·W)    N × H × W cell bytes   (env i at i·H·W, row-major)
-//!   [final_offset, final_offset + N·H·W)    N × H × W final cells  (written where the step ended an episode)
+//!   [final_cells_offset, … + N·H·W)         N × H × W final cells  (written where the step ended an episode)
 //! ```
 //!
 //! The final cells are the grid a finished episode ended on (see
@@ -20,11 +20,11 @@
 //! `EnvMeta` records can be viewed in place) sized exactly for the run's
 //! [`ObsShape`], where a worst-case fixed array of `MAX_ENVS × MAX_CELLS`
 //! would pin megabytes for every chunk. The shape is fixed for the lifetime
-//! of a run, so the
-//! publisher allocates with the `Static` strategy and never regrows.
+//! of a run, so the publisher allocates with the `Static` strategy and
+//! never regrows.
 //!
 //! [`ObsBatchMut`] splits a loaned sample into `(&mut ObsHeader,
-//! &mut [EnvMeta], &mut [u8])` for the simulator to write directly;
+//! &mut [EnvMeta], cells, final cells)` for the simulator to write directly;
 //! [`ObsBatch`] is the subscribers' read view. Both are built from a header
 //! and the raw payload with safe `bytemuck` casts; [`crate::service`]
 //! wraps them around real samples.
@@ -661,8 +661,45 @@ mod tests {
         assert!(matches!(
             ObsBatch::new(&header, &words[..10], &s, 1),
             Err(SchemaError::PayloadTooShort {
-                needed: 124,
+                needed: 212,
                 got: 80,
+                ..
+            })
+        ));
+    }
+
+    /// A writer of schema v2 (20-byte records, no end pose, no final cells)
+    /// is refused by its header, naming both versions; and a payload of the
+    /// v2 size behind a current header is too short, never read.
+    #[test]
+    fn a_v2_batch_is_refused_by_a_v3_reader() {
+        assert_eq!(SCHEMA_VERSION, 3, "update this test's versions");
+        let s = shape();
+        let mut words = vec![0u64; s.payload_words()];
+        let mut header = ObsHeader::new(&s, 1);
+        ObsBatchMut::new(&mut header, &mut words, &s).unwrap();
+        let mut v2 = header;
+        v2.schema_version = 2;
+        let e = ObsBatch::new(&v2, &words, &s, 1).unwrap_err();
+        assert!(matches!(
+            e,
+            SchemaError::SchemaVersion {
+                channel: Channel::Obs,
+                wire: 2,
+                ours: 3
+            }
+        ));
+        assert_eq!(
+            e.to_string(),
+            "observation batch schema v2 on the wire, this process speaks v3"
+        );
+        // 3 × 20 bytes of records, padded to 64, and 3 × 20 cells: 16 words.
+        let v2_words = (64 + 60usize).div_ceil(8);
+        assert!(matches!(
+            ObsBatch::new(&header, &words[..v2_words], &s, 1),
+            Err(SchemaError::PayloadTooShort {
+                needed: 212,
+                got: 128,
                 ..
             })
         ));

@@ -4,12 +4,13 @@
 //! for the action batch that answers it (lock-step, see
 //! `shm_schemas::service`).
 //!
-//! The one exception is the step records (reward, flags, agent; 20 bytes
-//! per environment): they are stepped into a private buffer and copied
-//! into the sample in one burst. The learner reads them from the other
-//! core, so each record's cache line belongs to the learner when the sim
-//! writes it again; written field by field while stepping, every write
-//! would wait for the line (the cost is measured in
+//! The final cells (the grid of each episode the step ended) are written in
+//! place too. The one exception is the step records (reward, flags, agent,
+//! end pose; 28 bytes per environment): they are stepped into a private
+//! buffer and copied into the sample in one burst. The learner reads them
+//! from the other core, so each record's cache line belongs to the learner
+//! when the sim writes it again; written field by field while stepping,
+//! every write would wait for the line (the cost is measured in
 //! `docs/implementation_details.md`, "Pipeline throughput").
 //!
 //! With `--slices K` (default 2) the batch is `K` slices of `N / K`

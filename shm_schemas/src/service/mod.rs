@@ -22,15 +22,15 @@
 //! (one function per channel here), so start order does not matter. The
 //! schema version and the run's shape are part of the service's identity:
 //! the user-header / payload type names carry the version
-//! (`wg.ObsHeader.v2`: iceoryx2 itself refuses another version with
+//! (`wg.ObsHeader.v3`: iceoryx2 itself refuses another version with
 //! `IncompatibleTypes`), and service *attributes* carry
 //! `wg.schema_version`, `wg.num_envs`, `wg.grid` (`"WxH"`) and, for nodes
 //! that run a task, `wg.task` (`"doorkey/6"`: task and action count), which
 //! `open_or_create_with_attributes` verifies (`IncompatibleAttributes`).
 //! When iceoryx2 refuses, [`PipelineNode`] reads the existing service's
 //! static description (`Service::details`) and turns the refusal into a
-//! [`SchemaError`] that names the difference ("observation batch schema v1
-//! on the wire, this process speaks v2", "grid 25x19 expected, publisher
+//! [`SchemaError`] that names the difference ("observation batch schema v2
+//! on the wire, this process speaks v3", "grid 25x19 expected, publisher
 //! sends 13x13"). Every received sample's header is checked again
 //! (version, run, shape), so garbage never reaches a view.
 //!

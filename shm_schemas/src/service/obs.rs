@@ -148,7 +148,7 @@ pub struct ObsSampleMut<S: Service> {
 }
 
 impl<S: Service> ObsSampleMut<S> {
-    /// `(&mut ObsHeader, &mut [EnvMeta], &mut [u8])` over the shared memory.
+    /// Header, metas, cells and final cells, mutable, over the shared memory.
     pub fn batch_mut(&mut self) -> ObsBatchMut<'_> {
         let shape = self.shape;
         let (header, payload) = split_slice_sample(&mut self.sample);

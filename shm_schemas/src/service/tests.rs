@@ -1,8 +1,9 @@
 //! Tests of the service layer over real `ipc::Service` shared memory, each
-//! with its own iceoryx2 prefix so they run in parallel; one test spawns
-//! this test binary again as a second process.
+//! with its own iceoryx2 prefix so they run in parallel; a few spawn this
+//! test binary again as a second process ([`child_process_entry`]).
 
-use std::process::{Child, Command};
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -415,8 +416,45 @@ fn graph_snapshot_reaches_late_joiner() {
 #[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
 #[repr(C)]
 #[type_name("wg.ObsHeader.v99")]
+struct ObsHeaderV99 {
+    words: [u64; 6],
+}
+
+/// The `ObsHeader` of schema v2 (before the end pose and the final cells
+/// of issue 24): same size, its own type name.
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("wg.ObsHeader.v2")]
 struct ObsHeaderV2 {
     words: [u64; 6],
+}
+
+/// Creates `wg/<run>/obs` for `shape` as a writer of schema `version`
+/// would: its user header `H` and its `wg.schema_version` attribute.
+fn create_obs_service_of_version<H: std::fmt::Debug + ZeroCopySend>(
+    node: &PipelineNode<ipc::Service>,
+    shape: ObsShape,
+    version: u32,
+) -> iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [u64], H> {
+    let name = service_name(node.run(), Channel::Obs).unwrap();
+    let attr =
+        |key: &str, value: String| (key.try_into().unwrap(), value.as_str().try_into().unwrap());
+    let attrs = [
+        attr(ATTR_SCHEMA_VERSION, version.to_string()),
+        attr(ATTR_NUM_ENVS, shape.num_envs.to_string()),
+        attr(ATTR_GRID, shape.grid_attr()),
+        attr(ATTR_SLICES, shape.slices.to_string()),
+    ]
+    .iter()
+    .fold(AttributeSpecifier::new(), |a, (k, v)| {
+        a.define(k, v).unwrap()
+    });
+    node.node()
+        .service_builder(&name)
+        .publish_subscribe::<[u64]>()
+        .user_header::<H>()
+        .create_with_attributes(&attrs)
+        .unwrap()
 }
 
 #[test]
@@ -425,26 +463,7 @@ fn other_schema_version_is_refused_at_open() {
     let t = TestPrefix::new("schema");
     let shape = ObsShape::new(4, 13, 13).unwrap();
     let future = node(&t, "future_sim");
-    let name = service_name(&run(), Channel::Obs).unwrap();
-    let attrs = AttributeSpecifier::new()
-        .define(
-            &ATTR_SCHEMA_VERSION.try_into().unwrap(),
-            &"99".try_into().unwrap(),
-        )
-        .unwrap()
-        .define(&ATTR_NUM_ENVS.try_into().unwrap(), &"4".try_into().unwrap())
-        .unwrap()
-        .define(&ATTR_GRID.try_into().unwrap(), &"13x13".try_into().unwrap())
-        .unwrap()
-        .define(&ATTR_SLICES.try_into().unwrap(), &"1".try_into().unwrap())
-        .unwrap();
-    let _v2 = future
-        .node()
-        .service_builder(&name)
-        .publish_subscribe::<[u64]>()
-        .user_header::<ObsHeaderV2>()
-        .create_with_attributes(&attrs)
-        .unwrap();
+    let _v99 = create_obs_service_of_version::<ObsHeaderV99>(&future, shape, 99);
 
     let learner = node(&t, "learner");
     let err = learner.obs_subscriber(shape).unwrap_err();
@@ -463,6 +482,53 @@ fn other_schema_version_is_refused_at_open() {
         err.to_string(),
         format!("observation batch schema v99 on the wire, this process speaks v{SCHEMA_VERSION}")
     );
+}
+
+/// A simulator of schema v2, in another process, holds the run's
+/// observation service: a v3 reader is refused, the message naming both
+/// versions, and neither the reader nor the publisher side is created.
+#[test]
+fn a_v2_process_is_refused_by_a_v3_reader_naming_both_versions() {
+    assert_eq!(SCHEMA_VERSION, 3, "update the stand-in and this test");
+    let _w = Watchdog::arm("a_v2_process_is_refused_by_a_v3_reader_naming_both_versions");
+    let t = TestPrefix::new("v2proc");
+    let mut child = spawn_child_with(CHILD_V2_SIM, &t, |c| {
+        c.stdin(Stdio::piped()).stdout(Stdio::piped());
+    });
+    // The child's stdout stays open until it exits (libtest still writes
+    // there), so the rest is drained below.
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let ready = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .any(|l| l.ends_with(CHILD_READY));
+    assert!(ready, "the v2 child never created its service");
+
+    let shape = two_process_shape();
+    let learner = node(&t, "learner");
+    for err in [
+        learner.obs_subscriber(shape).unwrap_err(),
+        learner.obs_publisher(shape).unwrap_err(),
+    ] {
+        assert!(
+            matches!(
+                err,
+                ShmError::Schema(SchemaError::SchemaVersion {
+                    channel: Channel::Obs,
+                    wire: 2,
+                    ours: 3
+                })
+            ),
+            "{err:?}"
+        );
+        assert_eq!(
+            err.to_string(),
+            "observation batch schema v2 on the wire, this process speaks v3"
+        );
+    }
+    drop(child.stdin.take());
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    assert!(reap(child).success(), "{rest:?}");
 }
 
 #[test]
@@ -484,6 +550,22 @@ fn other_schema_version_in_a_header_is_refused() {
     assert_eq!(
         err.to_string(),
         format!("observation batch schema v9 on the wire, this process speaks v{SCHEMA_VERSION}")
+    );
+    // A header of the previous version (v2) is refused the same way.
+    let mut sample = publisher.loan(1, 0).unwrap();
+    sample.batch_mut().header.schema_version = SCHEMA_VERSION - 1;
+    sample.send().unwrap();
+    let err = poll("refused batch", || match sub.receive() {
+        Ok(None) => None,
+        other => Some(other),
+    })
+    .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "observation batch schema v{} on the wire, this process speaks v{SCHEMA_VERSION}",
+            SCHEMA_VERSION - 1
+        )
     );
 }
 
@@ -618,7 +700,13 @@ fn shared_memory_is_private_and_torn_down() {
 
 /// Spawns this test binary running only [`child_process_entry`] in `role`.
 fn spawn_child(role: &str, t: &TestPrefix) -> Child {
-    Command::new(std::env::current_exe().unwrap())
+    spawn_child_with(role, t, |_| {})
+}
+
+/// [`spawn_child`], with `setup` applied to the command (stdio).
+fn spawn_child_with(role: &str, t: &TestPrefix, setup: impl FnOnce(&mut Command)) -> Child {
+    let mut command = Command::new(std::env::current_exe().unwrap());
+    command
         .args([
             "--exact",
             "service::tests::child_process_entry",
@@ -627,9 +715,24 @@ fn spawn_child(role: &str, t: &TestPrefix) -> Child {
         ])
         .env(CHILD_ROLE, role)
         .env(CHILD_PREFIX, &t.prefix)
-        .env(CHILD_RUN, run().as_str())
-        .spawn()
-        .unwrap()
+        .env(CHILD_RUN, run().as_str());
+    setup(&mut command);
+    command.spawn().unwrap()
+}
+
+/// Child role: a simulator of schema v2 holding the observation service
+/// until its stdin closes.
+const CHILD_V2_SIM: &str = "v2_sim";
+/// What a child prints once its service exists.
+const CHILD_READY: &str = "child ready";
+
+fn two_process_shape() -> ObsShape {
+    ObsShape::new(
+        TWO_PROCESS_SHAPE.0,
+        TWO_PROCESS_SHAPE.1,
+        TWO_PROCESS_SHAPE.2,
+    )
+    .unwrap()
 }
 
 /// Waits for `child` (reaping it: a zombie would look alive to iceoryx2),
@@ -681,6 +784,13 @@ fn child_process_entry() {
                 assert_eq!(act.header().seq, seq);
                 assert!(act.actions().iter().all(|&a| a == (seq % 3) as u8));
             }
+        }
+        // A simulator of schema v2: its service, no ports, until stdin closes.
+        CHILD_V2_SIM => {
+            let sim = PipelineNode::<ipc::Service>::new(&config, run, "v2_sim").unwrap();
+            let _service = create_obs_service_of_version::<ObsHeaderV2>(&sim, shape, 2);
+            println!("{CHILD_READY}");
+            std::io::Read::read_to_end(&mut std::io::stdin(), &mut Vec::new()).unwrap();
         }
         // A process that dies holding a node and a publisher.
         "crash" => {
