@@ -218,13 +218,14 @@ fn bench_sim_json_has_the_documented_fields() {
         assert!(r[k].as_f64().is_some_and(|v| v > 0.0), "{k} in {r}");
     }
     // What was run, as asked, and the bytes of one observation: the small
-    // maze's 13×13 cells and one 20-byte EnvMeta.
+    // maze's 13×13 cells and one 28-byte EnvMeta (the final cells are
+    // written only on the steps that end an episode).
     assert_eq!(
         (&r["maze"], &r["task"], &r["envs"], &r["threads"]),
         (&"small".into(), &"multigoal".into(), &64.into(), &2.into()),
         "{r}"
     );
-    assert_eq!(r["obs_bytes_per_step"], 13 * 13 + 20);
+    assert_eq!(r["obs_bytes_per_step"], 13 * 13 + 28);
     // The ratio is the median of the windows' ratios.
     let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
     assert!(
@@ -413,4 +414,98 @@ fn png_paths_get_their_folder_or_a_clear_refusal() {
         "{}",
         stderr(&out)
     );
+}
+
+/// Sizes no run could hold are refused, naming the option and its limit,
+/// before anything is written; never a panic or an abort.
+#[test]
+fn seed_ranges_and_batches_too_large_are_refused_naming_the_option_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let stderr = |out: &Output| String::from_utf8_lossy(&out.stderr).into_owned();
+    for seeds in ["0..18446744073709551615", "0..1000000000", "5..10006"] {
+        let out = worldgraph(&["evaluate", "no-such-run", "--seeds", seeds]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{seeds}: {err}");
+        assert!(
+            err.contains(&format!("--seeds \"{seeds}\"")) && err.contains("at most 10000"),
+            "{seeds}: {err}"
+        );
+    }
+    let config = write(dir.path(), "huge.toml", "[agent]\nenvs = 100000000\n");
+    let run = dir.path().join("run");
+    for (args, needles) in [
+        (
+            vec![
+                "train",
+                "--agent",
+                "a2c",
+                "--config",
+                &config,
+                "--run",
+                run.to_str().unwrap(),
+            ],
+            vec!["envs = 100000000", "huge.toml", "at most 1024 environments"],
+        ),
+        (
+            vec![
+                "discover",
+                "--envs",
+                "100000000",
+                "--run",
+                run.to_str().unwrap(),
+            ],
+            vec!["--envs 100000000", "1024"],
+        ),
+    ] {
+        let out = worldgraph(&args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: {n:?} not in {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!run.exists(), "{args:?} wrote its run directory");
+    }
+}
+
+/// Output into a closed pipe (`worldgraph ... | true`) ends the command
+/// quietly, as SIGPIPE ends any Unix tool: no panic, no status 101.
+#[test]
+fn a_command_writing_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let config = write(
+        dir.path(),
+        "tiny.toml",
+        "env_steps = 320\neval_every = 160\nvalidation_seeds = 2\ntest_seeds = 2\n\
+         [agent]\nenvs = 8\nrollout_len = 20\n",
+    );
+    let run = dir.path().join("run").display().to_string();
+    let commands: [Vec<&str>; 3] = [
+        vec!["clean", "--min-age", "100000"],
+        vec!["sim", "render", "--maze", "small"],
+        vec![
+            "train", "--agent", "a2c", "--config", &config, "--run", &run,
+        ],
+    ];
+    for args in commands {
+        // A pipe whose reading end is closed before the command starts.
+        let (read, write) = nix::unistd::pipe().unwrap();
+        drop(read);
+        let out = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+            .args(&args)
+            .env("WORLDGRAPH_TORCH_THREADS", "1")
+            .stdout(std::process::Stdio::from(write))
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .expect("run worldgraph");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            out.status.signal(),
+            Some(nix::sys::signal::Signal::SIGPIPE as i32),
+            "{args:?}: {:?}: {err}",
+            out.status
+        );
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
 }

@@ -175,38 +175,79 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
     );
 }
 
+/// `train` arguments of WN over `V_p` with traversal on the small maze's
+/// MultiGoal (and `π_g` initialisation with `init`).
+fn wn_traversal_args(seed: u64, init: bool, cfg: &str, graph: &Path, run: &Path) -> Vec<String> {
+    let mut args: Vec<String> = [
+        "train",
+        "--task",
+        "multigoal",
+        "--maze",
+        "small",
+        "--agent",
+        "wn",
+        "--candidates",
+        "pivotal",
+        "--traversal",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    if init {
+        args.extend(["--init".into(), "pi-g".into()]);
+    }
+    let seed = seed.to_string();
+    for (k, v) in [
+        ("--seed", seed.as_str()),
+        ("--config", cfg),
+        ("--world-graph", graph.to_str().unwrap()),
+        ("--run", run.to_str().unwrap()),
+    ] {
+        args.extend([k.to_string(), v.to_string()]);
+    }
+    args
+}
+
+#[test]
+fn validation_in_the_middle_of_a_run_leaves_its_training_unchanged() {
+    // The same 20 iterations, validated after every 5 or only at the end:
+    // the training environments and the controller go on across
+    // validations, so the trained weights are the same bit for bit.
+    let dir = tempfile::tempdir().unwrap();
+    let graph = discovery_files(dir.path());
+    let run = |name: &str, eval_every: u32| -> PathBuf {
+        let cfg = dir.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &cfg,
+            TINY.replace("eval_every = 800", &format!("eval_every = {eval_every}")),
+        )
+        .unwrap();
+        let run = dir.path().join(name);
+        let args = wn_traversal_args(3, false, &cfg.display().to_string(), &graph, &run);
+        ok(&worldgraph(
+            &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        ));
+        run
+    };
+    let often = run("often", 800);
+    let once = run("once", 3200);
+    let weights = |run: &Path, segments: u32| {
+        std::fs::read(run.join("checkpoint").join(format!("agent-{segments}.ot"))).unwrap()
+    };
+    assert_eq!(read(&often.join("metrics.csv")).lines().count(), 5);
+    assert_eq!(read(&once.join("metrics.csv")).lines().count(), 2);
+    assert!(
+        weights(&often, 4) == weights(&once, 1),
+        "validating every 5 iterations changed what was trained"
+    );
+}
+
 #[test]
 fn a_killed_run_resumes_and_ends_as_an_uninterrupted_one() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path());
     let graph = discovery_files(dir.path());
-    let args = |run: &Path| -> Vec<String> {
-        [
-            "train",
-            "--task",
-            "multigoal",
-            "--maze",
-            "small",
-            "--agent",
-            "wn",
-            "--candidates",
-            "pivotal",
-            "--traversal",
-            "--init",
-            "pi-g",
-            "--seed",
-            "1",
-            "--config",
-            &cfg,
-            "--world-graph",
-            graph.to_str().unwrap(),
-            "--run",
-            run.to_str().unwrap(),
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
-    };
+    let args = |run: &Path| wn_traversal_args(1, true, &cfg, &graph, run);
     let whole = dir.path().join("whole");
     let a: Vec<String> = args(&whole);
     ok(&worldgraph(

@@ -35,6 +35,9 @@ pub const TEST_STREAM: u64 = 2_000_003;
 /// Training seeds are below this (so their streams `(seed, i)` never meet
 /// the validation and test streams).
 pub const MAX_TRAIN_SEED: u64 = 1_000_000;
+/// The most seeds one evaluation steps side by side (`evaluate --seeds`,
+/// `validation_seeds`, `test_seeds`): each is an environment of one batch.
+pub const MAX_EVAL_SEEDS: u64 = 10_000;
 
 /// The agent on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -104,7 +107,9 @@ pub struct TrainArgs {
     /// Env-step budget [default: the --config file's, else 1,000,000].
     #[arg(long)]
     pub env_steps: Option<u64>,
-    /// Run directory [default: runs/train-<maze>-<task>-<agent>-<seed>].
+    /// Run directory: new, empty, or a train run to resume (any other
+    /// directory is refused untouched) [default:
+    /// runs/train-<maze>-<task>-<agent>-<seed>].
     #[arg(long)]
     pub run: Option<PathBuf>,
     /// Step the training environments in a sim process over shared memory
@@ -277,6 +282,34 @@ fn agent_config(a: &TrainArgs, base: &AgentConfig) -> AgentConfig {
         cfg.traversal = true;
     }
     cfg
+}
+
+/// Refuses a budget that cannot run (before anything is written): no
+/// segment, no validation or test seed, or batches larger than a run can
+/// hold (`file`, the --config file, is named).
+fn check_budget(cfg: &TrainConfig, file: Option<&Path>) -> anyhow::Result<()> {
+    let from = file.map_or(String::new(), |f| format!(" (in {})", f.display()));
+    anyhow::ensure!(cfg.eval_every > 0, "eval_every must be at least 1");
+    anyhow::ensure!(
+        cfg.validation_seeds > 0 && cfg.test_seeds > 0,
+        "validation_seeds and test_seeds must be at least 1"
+    );
+    let max_envs = super::discover::MAX_ENVS;
+    anyhow::ensure!(
+        cfg.agent.envs <= max_envs,
+        "[agent] envs = {}{from}: at most {max_envs} environments",
+        cfg.agent.envs
+    );
+    for (name, n) in [
+        ("validation_seeds", cfg.validation_seeds),
+        ("test_seeds", cfg.test_seeds),
+    ] {
+        anyhow::ensure!(
+            n as u64 <= MAX_EVAL_SEEDS,
+            "{name} = {n}{from}: at most {MAX_EVAL_SEEDS} seeds"
+        );
+    }
+    Ok(())
 }
 
 /// Reads a TOML config file.
@@ -474,28 +507,75 @@ fn lock_run_dir(dir: &Path) -> anyhow::Result<std::fs::File> {
     }
 }
 
+/// The files of segment `k`'s checkpoint besides `state.json`: the agent's
+/// weights and optimiser moments, the training controller (record and
+/// tensors) and the training environments' states.
+fn checkpoint_files(k: u64) -> [String; 4] {
+    [
+        format!("agent-{k}.ot"),
+        format!("controller-{k}.json"),
+        format!("controller-{k}.ot"),
+        format!("envs-{k}.json"),
+    ]
+}
+
 fn save_state(
     dir: &Path,
     state: &RunState,
     agent: &HrlAgent,
     best: Option<&[u8]>,
+    env: Option<&dyn BatchEnvironment>,
 ) -> anyhow::Result<()> {
     let ckpt = dir.join("checkpoint");
     std::fs::create_dir_all(&ckpt).with_context(|| format!("cannot create {}", ckpt.display()))?;
-    write_atomic(
-        &ckpt.join(format!("agent-{}.ot", state.segments_done)),
-        &agent.to_bytes()?,
-    )?;
+    let [weights, record, tensors, envs] = checkpoint_files(state.segments_done);
+    write_atomic(&ckpt.join(weights), &agent.to_bytes()?)?;
+    if let Some(snapshot) = env.and_then(|e| e.snapshot()) {
+        let (json, t) = agent.save_controller()?;
+        write_atomic(&ckpt.join(record), &json)?;
+        write_atomic(&ckpt.join(tensors), &t)?;
+        write_atomic(&ckpt.join(envs), &serde_json::to_vec(&snapshot)?)?;
+    }
     if let Some(b) = best {
         write_atomic(&ckpt.join("best.ot"), b)?;
     }
-    // The state names its weight file: written last, it commits the set.
+    // The state names its files: written last, it commits the set.
     write_atomic(&ckpt.join("state.json"), &serde_json::to_vec_pretty(state)?)?;
     if state.segments_done > 0 {
-        let _ = std::fs::remove_file(ckpt.join(format!("agent-{}.ot", state.segments_done - 1)));
+        for old in checkpoint_files(state.segments_done - 1) {
+            let _ = std::fs::remove_file(ckpt.join(old));
+        }
     }
     write_metrics(dir, state)?;
     Ok(())
+}
+
+/// Puts the training environments and the agent's controller back in the
+/// states the checkpoint of `state` saved; false when it saved none (a
+/// pipeline run, or a run made before they were saved).
+fn restore_training(
+    dir: &Path,
+    state: &RunState,
+    agent: &mut HrlAgent,
+    env: &mut dyn BatchEnvironment,
+) -> anyhow::Result<bool> {
+    let ckpt = dir.join("checkpoint");
+    let [_, record, tensors, envs] = checkpoint_files(state.segments_done);
+    let (record, tensors, envs) = (ckpt.join(record), ckpt.join(tensors), ckpt.join(envs));
+    if !(record.exists() && tensors.exists() && envs.exists()) {
+        return Ok(false);
+    }
+    let read = |p: &Path| std::fs::read(p).with_context(|| format!("cannot read {}", p.display()));
+    let states: Vec<sim::EnvState> = serde_json::from_slice(&read(&envs)?)
+        .with_context(|| format!("{} is not a set of environment states", envs.display()))?;
+    if !env
+        .restore(&states)
+        .with_context(|| format!("cannot restore {}", envs.display()))?
+    {
+        return Ok(false);
+    }
+    agent.load_controller(&read(&record)?, &read(&tensors)?, &record)?;
+    Ok(true)
 }
 
 fn write_metrics(dir: &Path, state: &RunState) -> anyhow::Result<()> {
@@ -583,16 +663,19 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         cfg.env_steps = s;
     }
     cfg.agent.validate()?;
-    anyhow::ensure!(cfg.eval_every > 0, "eval_every must be at least 1");
-    anyhow::ensure!(
-        cfg.validation_seeds > 0 && cfg.test_seeds > 0,
-        "validation_seeds and test_seeds must be at least 1"
-    );
+    check_budget(&cfg, a.config.as_deref())?;
     let layout = a.maze.layout(a.task.uses_door_key_layout());
     let env_cfg = EnvConfig::for_task(a.task, &layout);
     let dir = run_dir(&a, &layout, &cfg.agent);
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let _lock = lock_run_dir(&dir)?;
+    // Nothing is written before the directory, the world graph and the
+    // run it may hold are known to fit this run.
+    let mut own = vec!["lock".to_string()];
+    own.extend(
+        a.config
+            .as_deref()
+            .and_then(|c| super::run_dir::name_in(&dir, c)),
+    );
+    super::run_dir::check("--run", &dir, super::run_dir::RunKind::Train, &own)?;
     let world_graph = match &a.world_graph {
         Some(p) => Some(
             std::fs::canonicalize(p)
@@ -600,6 +683,16 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         ),
         None => None,
     };
+    if let Some(wg) = &world_graph {
+        if super::run_dir::kind_of(wg) == Some(super::run_dir::RunKind::Train) {
+            bail!(
+                "--world-graph {} is a train run; give the discover run whose world graph \
+                 it used",
+                wg.display()
+            );
+        }
+        super::discover::check_world_graph_layout(wg, a.maze, &layout)?;
+    }
     let identity = RunIdentity {
         maze: layout.name.clone(),
         task: a.task,
@@ -610,17 +703,37 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             ..cfg.clone()
         },
     };
+    let state_path = dir.join("checkpoint").join("state.json");
+    let read_state = || -> anyhow::Result<Option<RunState>> {
+        if !state_path.exists() {
+            return Ok(None);
+        }
+        let old: RunState = serde_json::from_slice(&std::fs::read(&state_path)?)
+            .with_context(|| format!("{} is not a training state", state_path.display()))?;
+        if old.identity != identity {
+            bail!(
+                "{} holds another run ({}); use another --run",
+                dir.display(),
+                identity_diff(&old.identity, &identity)
+            );
+        }
+        Ok(Some(old))
+    };
+    read_state()?;
+    let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
+
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let _lock = lock_run_dir(&dir)?;
     write_atomic(&dir.join("config.toml"), toml::to_string(&cfg)?.as_bytes())?;
     write_atomic(
         &dir.join("seeds.json"),
         &serde_json::to_vec_pretty(&serde_json::json!({
-            "train": {"seed": a.seed, "environments": cfg.agent.envs, "streams": format!("segment s: (env_seed({}, s), 0..{})", a.seed, cfg.agent.envs)},
+            "train": {"seed": a.seed, "environments": cfg.agent.envs, "streams": format!("(env_seed({}, 0), 0..{}), carried across segments", a.seed, cfg.agent.envs)},
             "validation": {"stream": VALIDATION_STREAM, "seeds": format!("0..{}", cfg.validation_seeds)},
             "test": {"stream": TEST_STREAM, "seeds": format!("0..{}", cfg.test_seeds)},
         }))?,
     )?;
 
-    let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
     let window_coverage = agent.window_coverage();
     if let Some(c) = &window_coverage {
         eprintln!("train: narrow goals: {c}");
@@ -634,17 +747,8 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         rows: Vec::new(),
         wall_seconds: Vec::new(),
     };
-    let state_path = dir.join("checkpoint").join("state.json");
-    if state_path.exists() {
-        let old: RunState = serde_json::from_slice(&std::fs::read(&state_path)?)
-            .with_context(|| format!("{} is not a training state", state_path.display()))?;
-        if old.identity != identity {
-            bail!(
-                "{} holds another run ({}); use another --run",
-                dir.display(),
-                identity_diff(&old.identity, &identity)
-            );
-        }
+    // Read again under the lock: the state a finished holder left.
+    if let Some(old) = read_state()? {
         let weights = dir
             .join("checkpoint")
             .join(format!("agent-{}.ot", old.segments_done));
@@ -669,15 +773,18 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     bar.set_position(state.segments_done * iters_per_segment);
     let started = Instant::now();
     let mut wall_before: f64 = state.wall_seconds.last().copied().unwrap_or(0.0);
-    while state.segments_done < segments {
-        let seg_start = Instant::now();
-        // A segment is a function of the checkpoint: fresh environments
-        // seeded by (seed, segment), so a resumed run repeats the
-        // uninterrupted one.
+    // The training environments live for the whole run: validation plays
+    // its own environments with a controller of its own, so it leaves the
+    // training stream untouched, and a checkpoint saves the environments'
+    // and the controller's states, so a resumed run goes on mid-episode
+    // exactly where it stopped. (In the pipeline the sim process owns the
+    // environments; there a resumed run starts fresh episodes seeded by
+    // (seed, segment).)
+    let (mut env, pipeline) = if state.segments_done < segments {
         let seg_seed = sim::env_seed(a.seed, state.segments_done);
-        let (mut env, pipeline) = if a.pipeline {
+        if a.pipeline {
             let (env, p) = pipeline_env(&a, cfg.agent.envs, seg_seed, &dir)?;
-            (env, Some(p))
+            (Some(env), Some(p))
         } else {
             let env: Box<dyn BatchEnvironment> = Box::new(InProcess::new(
                 layout.clone(),
@@ -686,12 +793,26 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                 seg_seed,
                 1,
             )?);
-            (env, None)
-        };
-        agent.start_segment(env.as_mut(), state.segments_done)?;
+            (Some(env), None)
+        }
+    } else {
+        (None, None)
+    };
+    if let Some(env) = env.as_mut() {
+        let resumed =
+            state.segments_done > 0 && restore_training(&dir, &state, &mut agent, env.as_mut())?;
+        if !resumed {
+            agent.start_segment(env.as_mut(), state.segments_done)?;
+        }
+    }
+    while state.segments_done < segments {
+        let seg_start = Instant::now();
+        let train_env = env
+            .as_mut()
+            .expect("invariant: made above while segments remain");
         let mut stats = Vec::with_capacity(iters_per_segment as usize);
         for _ in 0..iters_per_segment {
-            let s = agent.train_iteration(env.as_mut())?;
+            let s = agent.train_iteration(train_env.as_mut())?;
             bar.inc(1);
             bar.set_message(format!(
                 "return {:.2}  validation {}",
@@ -702,11 +823,6 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                     .map_or("-".to_string(), |r| format!("{:.2}", r.validation_score))
             ));
             stats.push(s);
-        }
-        drop(env);
-        if let Some((mut p, run_name)) = pipeline {
-            p.stop_all(std::time::Duration::from_secs(3));
-            super::run::teardown(&run_name)?;
         }
         // The same validation episodes every time: fresh environments of
         // the validation seeds.
@@ -739,7 +855,12 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             state.best_segment = state.segments_done;
             best_bytes = Some(agent.to_bytes()?);
         }
-        save_state(&dir, &state, &agent, best_bytes.as_deref())?;
+        save_state(&dir, &state, &agent, best_bytes.as_deref(), env.as_deref())?;
+    }
+    drop(env);
+    if let Some((mut p, run_name)) = pipeline {
+        p.stop_all(std::time::Duration::from_secs(3));
+        super::run::teardown(&run_name)?;
     }
     bar.finish_and_clear();
     let _ = started;
@@ -968,7 +1089,8 @@ fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
 pub struct EvaluateArgs {
     /// A `worldgraph train` run directory.
     pub run: PathBuf,
-    /// Test seeds as `A..B` (B exclusive), environments `(test stream, A..B)`.
+    /// Test seeds as `A..B` (B exclusive), environments `(test stream, A..B)`;
+    /// at most 10,000 at once.
     #[arg(long, default_value = "0..100")]
     pub seeds: String,
     /// Episodes per seed (the seed fixes the maze's randomness; the policy's
@@ -992,11 +1114,26 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         .with_context(|| format!("--seeds {:?} is not A..B", a.seeds))?;
     anyhow::ensure!(end > first, "--seeds {:?} is empty", a.seeds);
     anyhow::ensure!(
+        end - first <= MAX_EVAL_SEEDS,
+        "--seeds {:?} asks for {} seeds: at most {MAX_EVAL_SEEDS} at once (score the range \
+         in parts)",
+        a.seeds,
+        end - first
+    );
+    anyhow::ensure!(
         a.episodes_per_seed > 0,
         "--episodes-per-seed must be at least 1"
     );
     if let Some(path) = &a.picture {
         crate::output::prepare("--picture", path)?;
+    }
+    if let Some(kind @ super::run_dir::RunKind::Discover) = super::run_dir::kind_of(&a.run) {
+        bail!(
+            "{} is {}, not a train run: evaluate scores a train run's best checkpoint (give \
+             this one to `train --world-graph`)",
+            a.run.display(),
+            super::run_dir::describe(&a.run, kind)
+        );
     }
     let state_path = a.run.join("checkpoint").join("state.json");
     let state: RunState =
@@ -1008,7 +1145,13 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             )
         })?)?;
     let id = &state.identity;
-    let maze: Maze = id.maze.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+    // A Door-Key run records its layout, `<maze>-doorkey`.
+    let maze: Maze = id
+        .maze
+        .strip_suffix("-doorkey")
+        .unwrap_or(&id.maze)
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!(e))?;
     let layout = maze.layout(id.task.uses_door_key_layout());
     let env_cfg = EnvConfig::for_task(id.task, &layout);
     let mut agent = build_agent(

@@ -500,7 +500,7 @@ mod tests {
             .expand([64, -1], false);
         let wide = Tensor::from_slice(&[2i64]).expand([64], false);
         let pn = head.narrow(&h, &wide, &local, &mask);
-        let mut rng = rand::SeedableRng::seed_from_u64(1);
+        let mut rng = <rand::rngs::SmallRng as rand::SeedableRng>::seed_from_u64(1);
         for _ in 0..20 {
             for k in crate::seeding::sample_index(&mut rng, &pn.probs()) {
                 assert!(valid[k], "slot {k} is masked");
