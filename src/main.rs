@@ -118,7 +118,25 @@ fn set_torch_threads() {
     tch::set_num_interop_threads(1);
 }
 
+/// Output into a closed pipe (`worldgraph train ... | head`) ends the
+/// process quietly, as it ends any Unix tool: Rust ignores SIGPIPE, which
+/// makes every `println!` into a closed pipe panic ("failed printing to
+/// stdout"). With the signal's default back, the write ends the process
+/// (status 141 in a shell), whatever the command. A parent's children go
+/// with it (`pipeline::worldgraph_command`). iceoryx2 sends with
+/// `MSG_NOSIGNAL`, so shared memory is unaffected.
+#[allow(unsafe_code)]
+fn end_quietly_on_a_closed_pipe() {
+    // SAFETY: `signal` with `SIG_DFL` installs no handler (no code runs in
+    // signal context); it is called first in `main`, before this program
+    // starts a thread, and no library of it installs a SIGPIPE handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    end_quietly_on_a_closed_pipe();
     set_torch_threads();
     tracing_subscriber::fmt()
         .with_env_filter(

@@ -17,21 +17,68 @@ use nix::unistd::Pid;
 
 use crate::world::WorldArgs;
 
-/// A command that runs this very executable. When a rebuild has replaced
-/// its file since this process started (the path `current_exe` returns is
-/// gone), Linux's `/proc/self/exe` still names the running image, so the
-/// children run the same build as their parent; `argv[0]` stays
-/// `worldgraph`, which their usage messages print.
+/// A command that runs this very executable, as a child that dies with
+/// this process ([`die_with_parent`]). Every child of `worldgraph` (the
+/// roles of `run`, `soak` and `bench pipeline`, the sim and planner of
+/// `train`/`discover --pipeline`, the runs of `experiment`) is started
+/// from here. When a rebuild has replaced its file since this process
+/// started (the path `current_exe` returns is gone), Linux's
+/// `/proc/self/exe` still names the running image, so the children run the
+/// same build as their parent; `argv[0]` stays `worldgraph`, which their
+/// usage messages print.
 pub fn worldgraph_command() -> anyhow::Result<Command> {
     let exe = std::env::current_exe().context("cannot find the worldgraph executable")?;
     let running = Path::new("/proc/self/exe");
-    if !exe.exists() && running.exists() {
+    let mut cmd = if !exe.exists() && running.exists() {
         use std::os::unix::process::CommandExt;
         let mut cmd = Command::new(running);
         cmd.arg0("worldgraph");
-        return Ok(cmd);
+        cmd
+    } else {
+        Command::new(exe)
+    };
+    die_with_parent(&mut cmd);
+    Ok(cmd)
+}
+
+/// The signal a child gets when its parent dies, whatever killed the
+/// parent (SIGKILL included): SIGTERM, which every role turns into a clean
+/// stop (reports written, the last one out removes the run's shared
+/// memory) and which ends a `train` or `discover` at once (they resume
+/// from their last checkpoint).
+pub const PARENT_DEATH_SIGNAL: libc::c_int = libc::SIGTERM;
+
+/// Makes the child started by `cmd` get [`PARENT_DEATH_SIGNAL`] when this
+/// process dies (Linux `PR_SET_PDEATHSIG`), so a killed `run` or
+/// `experiment` leaves no sim, learner, planner or `train` running. A
+/// parent that died between the fork and the request is caught by
+/// comparing `getppid()` with its pid, recorded before the fork: the child
+/// then ends before `exec`.
+///
+/// The kernel sends the signal when the *thread* that forked exits, not
+/// the process: every `worldgraph` command starts its children from its
+/// main thread, which lives as long as the process.
+#[allow(unsafe_code)]
+fn die_with_parent(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    let parent = std::process::id() as libc::pid_t;
+    let signal = PARENT_DEATH_SIGNAL as libc::c_ulong;
+    // SAFETY: the closure runs in the child between `fork` and `exec`, where
+    // only async-signal-safe calls are allowed: it calls `prctl` and
+    // `getppid` (system calls), builds errors from an errno (no allocation)
+    // and takes no lock.
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, signal, 0, 0, 0) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            if libc::getppid() != parent {
+                // The parent is already gone: nobody would stop this child.
+                return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
+            }
+            Ok(())
+        });
     }
-    Ok(Command::new(exe))
 }
 
 /// One of the three processes.

@@ -294,3 +294,120 @@ fn bad_grids_are_refused_naming_what_is_wrong() {
     let err = refused(&worldgraph(d, &["table", "nothing-here"]));
     assert!(err.contains("nothing-here"), "{err}");
 }
+
+#[test]
+fn a_grid_killed_with_sigkill_takes_its_runs_with_it() {
+    use crate::reliability::{Orphans, alive, children_of};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A budget far longer than the test: the run is still training when
+    // its grid is killed.
+    std::fs::write(d.join("long.toml"), grid("long", 100_000_000, "\"a2c\"")).unwrap();
+    let log = std::fs::File::create(d.join("grid.log")).unwrap();
+    let mut parent = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(["experiment", "long.toml"])
+        .current_dir(d)
+        .env("WORLDGRAPH_TORCH_THREADS", "1")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .unwrap();
+    let pid = parent.id();
+    let run = d.join("runs/experiments/long/small/multigoal/a2c/seed-0");
+    let t0 = Instant::now();
+    while !(children_of(pid).len() == 1 && run.join("seeds.json").exists())
+        && t0.elapsed() < Duration::from_secs(60)
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let runs = Orphans {
+        pids: children_of(pid),
+        tag: "long".to_string(),
+    };
+    if runs.pids.len() != 1 || !run.join("seeds.json").exists() {
+        let _ = parent.kill();
+        let _ = parent.wait();
+        panic!(
+            "the grid never started its run: {}",
+            std::fs::read_to_string(d.join("grid.log")).unwrap_or_default()
+        );
+    }
+    parent.kill().unwrap();
+    parent.wait().unwrap();
+    let t0 = Instant::now();
+    while runs.pids.iter().any(|&p| alive(p)) && t0.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        runs.pids.iter().all(|&p| !alive(p)),
+        "the train run outlived its grid's SIGKILL"
+    );
+    // Its run directory is free: a rerun of the grid would take it.
+    let lock = std::fs::File::open(run.join("lock")).unwrap();
+    assert!(lock.try_lock().is_ok(), "the run's lock is still held");
+}
+
+#[test]
+fn a_grid_is_checked_whole_at_load_and_filters_that_select_nothing_warn() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A seed twice would be two runs sharing one directory and summary.
+    std::fs::write(
+        d.join("twice.toml"),
+        grid("g", 3840, "\"a2c\"").replace("seeds = [0]", "seeds = [0, 0]"),
+    )
+    .unwrap();
+    let err = refused(&worldgraph(d, &["experiment", "twice.toml", "--dry-run"]));
+    assert!(err.contains("seeds: 0 is listed twice"), "{err}");
+    // The discovery settings a grid pins are checked by --dry-run too.
+    for (text, what) in [
+        ("walk_len = 0\n", "walk_len"),
+        (
+            "[goal_chains]\nbatch_share = 2.0\n",
+            "goal_chains.batch_share",
+        ),
+        ("walk_lenn = 3\n", "walk_lenn"),
+    ] {
+        std::fs::write(d.join("discover.toml"), text).unwrap();
+        std::fs::write(
+            d.join("pinned.toml"),
+            format!(
+                "discover_config = \"discover.toml\"\n{}",
+                grid("g", 3840, "\"wn-pivotal\"")
+            ),
+        )
+        .unwrap();
+        let err = refused(&worldgraph(d, &["experiment", "pinned.toml", "--dry-run"]));
+        assert!(
+            err.contains("discover_config") && err.contains("discover.toml") && err.contains(what),
+            "{what:?} not in {err}"
+        );
+    }
+    assert!(!d.join("runs").exists(), "a refused grid starts nothing");
+    // Filters that select no run say so.
+    std::fs::write(d.join("ok.toml"), grid("g", 3840, "\"a2c\"")).unwrap();
+    let (out, err) = ok(&worldgraph(
+        d,
+        &[
+            "experiment",
+            "ok.toml",
+            "--dry-run",
+            "--seed",
+            "9",
+            "--maze",
+            "medium",
+        ],
+    ));
+    assert!(out.is_empty(), "{out}");
+    for w in [
+        "warning: --maze medium matches no run of ok.toml",
+        "warning: --seed 9 matches no run of ok.toml",
+        "warning: the filters (--maze medium --seed 9) select no run of ok.toml",
+    ] {
+        assert!(err.contains(w), "{w:?} not in {err}");
+    }
+    let (out, err) = ok(&worldgraph(d, &["experiment", "ok.toml", "--dry-run"]));
+    assert!(out.contains("small/multigoal/a2c/seed-0"), "{out}");
+    assert!(!err.contains("warning"), "{err}");
+}

@@ -656,3 +656,319 @@ fn role_logs_in_files_carry_no_colour_codes_and_a_quiet_run_prints_progress() {
     }
     assert!(shm_files(&run).is_empty());
 }
+
+// ------------------------------------------------------------ issue 21
+
+/// `(state, parent pid)` of process `pid` (Linux `/proc/<pid>/stat`).
+fn proc_state(pid: u32) -> Option<(char, u32)> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name, in parentheses, may hold spaces: fields follow the last ')'.
+    let mut fields = s.get(s.rfind(')')? + 1..)?.split_whitespace();
+    let state = fields.next()?.chars().next()?;
+    let ppid = fields.next()?.parse().ok()?;
+    Some((state, ppid))
+}
+
+/// Whether process `pid` runs (a zombie does not: it only waits to be reaped).
+pub(crate) fn alive(pid: u32) -> bool {
+    proc_state(pid).is_some_and(|(state, _)| state != 'Z')
+}
+
+/// The running children of process `pid`.
+pub(crate) fn children_of(pid: u32) -> Vec<u32> {
+    let mut out: Vec<u32> = std::fs::read_dir("/proc")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|&p| proc_state(p).is_some_and(|(state, ppid)| ppid == pid && state != 'Z'))
+        .collect();
+    out.sort_unstable();
+    out
+}
+
+/// Processes a test started through a parent: SIGKILLed when dropped if
+/// still running (a failed assertion leaves nothing behind), each only if
+/// its command line still names `tag` (its pid was not reused).
+pub(crate) struct Orphans {
+    pub(crate) pids: Vec<u32>,
+    pub(crate) tag: String,
+}
+
+impl Drop for Orphans {
+    fn drop(&mut self) {
+        for &p in &self.pids {
+            let cmdline = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
+            if alive(p) && String::from_utf8_lossy(&cmdline).contains(&self.tag) {
+                let _ = nix::sys::signal::kill(
+                    nix::unistd::Pid::from_raw(p as i32),
+                    nix::sys::signal::Signal::SIGKILL,
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_run_killed_with_sigkill_takes_its_processes_and_their_shared_memory_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = run_name("orphans");
+    let run_dir = dir.path().join("r");
+    // No --duration: the run would go on for ever.
+    let mut parent = spawn(
+        dir.path(),
+        "run.log",
+        &[
+            "run",
+            "--run",
+            &run,
+            "--run-dir",
+            run_dir.to_str().unwrap(),
+            "--maze",
+            "small",
+            "--envs",
+            "16",
+        ],
+    );
+    let pid = parent.0.id();
+    assert!(
+        wait_for(Duration::from_secs(60), || children_of(pid).len() == 3
+            && run_dir.join("sim.stats.jsonl").exists()),
+        "the run never started its three processes ({:?}): {}",
+        children_of(pid),
+        std::fs::read_to_string(dir.path().join("run.log")).unwrap_or_default()
+    );
+    let children = Orphans {
+        pids: children_of(pid),
+        tag: run.clone(),
+    };
+    assert!(
+        !shm_files(&run).is_empty(),
+        "the run holds no shared memory"
+    );
+    parent.0.kill().unwrap();
+    parent.0.wait().unwrap();
+    assert!(
+        wait_for(Duration::from_secs(10), || children
+            .pids
+            .iter()
+            .all(|&p| !alive(p))),
+        "still running after their parent's SIGKILL: {:?}",
+        children
+            .pids
+            .iter()
+            .filter(|&&p| alive(p))
+            .collect::<Vec<_>>()
+    );
+    assert!(
+        wait_for(Duration::from_secs(5), || shm_files(&run).is_empty()),
+        "shared memory left: {:?}",
+        shm_files(&run)
+    );
+    // The run's name is free again at once.
+    let out = run_bounded(
+        &[
+            "run",
+            "--run",
+            &run,
+            "--run-dir",
+            run_dir.to_str().unwrap(),
+            "--maze",
+            "small",
+            "--envs",
+            "16",
+            "--duration",
+            "2",
+        ],
+        Duration::from_secs(60),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(shm_files(&run).is_empty(), "{:?}", shm_files(&run));
+}
+
+/// Every file under `dir` with its bytes.
+fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = files_under(dir)
+        .into_iter()
+        .map(|f| {
+            let bytes = std::fs::read(&f).unwrap();
+            (f, bytes)
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+const TINY_TRAIN: &str = "env_steps = 320\neval_every = 160\nvalidation_seeds = 2\ntest_seeds = 2\n[agent]\nenvs = 8\nrollout_len = 20\n";
+
+fn train_args<'a>(config: &'a str, run: &'a str) -> Vec<&'a str> {
+    vec![
+        "train", "--maze", "small", "--agent", "a2c", "--config", config, "--run", run,
+    ]
+}
+
+#[test]
+fn train_and_discover_write_only_into_an_empty_directory_or_a_run_of_their_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let config = d.join("tiny.toml");
+    std::fs::write(&config, TINY_TRAIN).unwrap();
+    let config = config.to_str().unwrap();
+    let discovered = d.join("discovered");
+    let out = discover(discovered.to_str().unwrap(), &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let trained = d.join("trained");
+    let out = run_bounded(
+        &train_args(config, trained.to_str().unwrap()),
+        Duration::from_secs(120),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let folder = d.join("folder");
+    std::fs::create_dir(&folder).unwrap();
+    std::fs::write(folder.join("notes.txt"), "mine\n").unwrap();
+    std::fs::write(folder.join("config.toml"), "[package]\nname = \"mine\"\n").unwrap();
+
+    let cases: [(&str, &Path, &[&str]); 4] = [
+        (
+            "train",
+            &discovered,
+            &["is a discover run", "maze small", "--world-graph"],
+        ),
+        (
+            "train",
+            &folder,
+            &["is not empty and not a train run", "notes.txt"],
+        ),
+        (
+            "discover",
+            &trained,
+            &["is a train run, not a discover run"],
+        ),
+        (
+            "discover",
+            &folder,
+            &["is not empty and not a discover run", "notes.txt"],
+        ),
+    ];
+    for (command, target, needles) in cases {
+        let before = snapshot(target);
+        let t = target.to_str().unwrap();
+        let out = if command == "train" {
+            run_bounded(&train_args(config, t), Duration::from_secs(60))
+        } else {
+            discover(t, &[])
+        };
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{command} {t}: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{command} {t}: {n:?} not in: {err}");
+        }
+        assert!(err.contains("left untouched"), "{err}");
+        no_crash_text(&err);
+        assert!(
+            snapshot(target) == before,
+            "{command} changed {t}: {:?}",
+            files_under(target)
+        );
+    }
+    // A run of its own kind, and an empty directory, are taken.
+    let out = run_bounded(
+        &train_args(config, trained.to_str().unwrap()),
+        Duration::from_secs(120),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let empty = d.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let out = run_bounded(
+        &train_args(config, empty.to_str().unwrap()),
+        Duration::from_secs(120),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn a_world_graph_of_another_maze_is_refused_before_anything_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let config = d.join("tiny.toml");
+    std::fs::write(&config, TINY_TRAIN).unwrap();
+    let medium = d.join("medium");
+    let mut args = discover_args(medium.to_str().unwrap(), "1");
+    args[4] = "medium";
+    let out = run_bounded(&args, Duration::from_secs(300));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let run = d.join("wn");
+    for init in [
+        vec!["--agent", "wn", "--candidates", "pivotal"],
+        vec!["--agent", "a2c", "--init", "pi-g"],
+    ] {
+        let mut args = vec![
+            "train",
+            "--maze",
+            "small",
+            "--config",
+            config.to_str().unwrap(),
+            "--world-graph",
+            medium.to_str().unwrap(),
+            "--run",
+            run.to_str().unwrap(),
+        ];
+        args.extend(init);
+        let out = run_bounded(&args, Duration::from_secs(60));
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("is from maze medium (25x19), this run is small (13x13)"),
+            "{err}"
+        );
+        assert!(!err.contains("tensor"), "{err}");
+        no_crash_text(&err);
+        assert!(!run.exists(), "files written: {:?}", files_under(&run));
+    }
+    // `evaluate` says what a discover run is.
+    let out = run_bounded(
+        &["evaluate", medium.to_str().unwrap()],
+        Duration::from_secs(60),
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("is a discover run (the world graph of maze medium), not a train run"),
+        "{err}"
+    );
+    // `discover` and `train` default to the same maze.
+    for command in ["discover", "train"] {
+        let out = run_bounded(&[command, "--help"], Duration::from_secs(30));
+        let help = String::from_utf8_lossy(&out.stdout).into_owned();
+        // The --maze entry: its line and the description lines under it.
+        let mut lines = help.lines().skip_while(|l| !l.contains("--maze <MAZE>"));
+        let first = lines.next().unwrap_or_default().to_string();
+        let maze: Vec<&str> = lines
+            .take_while(|l| !l.trim_start().starts_with('-'))
+            .collect();
+        let maze = format!("{first} {}", maze.join(" "));
+        assert!(maze.contains("[default: small]"), "{command}: {maze}");
+    }
+}
+
+#[test]
+fn evaluate_scores_a_door_key_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, TINY_TRAIN).unwrap();
+    let run = dir.path().join("dk");
+    let mut args = train_args(config.to_str().unwrap(), run.to_str().unwrap());
+    args.extend(["--task", "doorkey"]);
+    let out = run_bounded(&args, Duration::from_secs(120));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = run_bounded(
+        &["evaluate", run.to_str().unwrap(), "--seeds", "0..3"],
+        Duration::from_secs(60),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("on test seeds 0..3"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}

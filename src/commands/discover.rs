@@ -21,8 +21,9 @@ use crate::world::WorldArgs;
 /// `discover` options.
 #[derive(Debug, Clone, Args)]
 pub struct DiscoverArgs {
-    /// Embedded maze: small, medium or large.
-    #[arg(long, default_value = "medium", conflicts_with = "layout")]
+    /// Embedded maze: small, medium or large (the default is `train`'s and
+    /// the demo's).
+    #[arg(long, default_value = "small", conflicts_with = "layout")]
     pub maze: Maze,
     /// A layout file instead of an embedded maze.
     #[arg(long)]
@@ -31,11 +32,12 @@ pub struct DiscoverArgs {
     /// --config file's `seed`].
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Run directory (checkpoints, graph, pictures); an interrupted run
-    /// resumes from it [default: runs/discover-<maze>-<seed>].
+    /// Run directory (checkpoints, graph, pictures): new, empty, or a
+    /// discover run, which resumes from it (any other directory is refused
+    /// untouched) [default: runs/discover-<maze>-<seed>].
     #[arg(long = "run", alias = "run-dir")]
     pub run_dir: Option<PathBuf>,
-    /// Environments stepped in parallel.
+    /// Environments stepped in parallel (at most 1024).
     #[arg(long, default_value_t = 32)]
     pub envs: usize,
     /// Most rounds of the loop (the budget) [default: 30, or the --config file's].
@@ -149,8 +151,12 @@ fn world(a: &DiscoverArgs, seed: u64) -> WorldArgs {
     }
 }
 
+/// The most environments a batch may have: the pipeline's limit, which
+/// `train` and `discover` keep in process too.
+pub const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
+
 /// Reads a TOML discovery config (unknown keys refused).
-fn read_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
+pub fn read_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
     let text =
         std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
     toml::from_str(&text).map_err(|e| {
@@ -181,6 +187,79 @@ fn fnv1a(bytes: &[u8]) -> String {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     });
     format!("{h:016x}")
+}
+
+/// Whether `text` is a discover run's `config.toml` (its identity).
+pub fn is_run_identity(text: &str) -> bool {
+    toml::from_str::<RunIdentity>(text).is_ok()
+}
+
+/// The layout a discover run was made on, as it recorded it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordedLayout {
+    /// The layout's name (`small`, or a layout file's name).
+    pub name: String,
+    /// Width in cells.
+    pub width: usize,
+    /// Height in cells.
+    pub height: usize,
+}
+
+/// The layout of the discover run in `dir`: from its identity
+/// (`config.toml`), else from its world graph (`graph.json`).
+pub fn recorded_layout(dir: &Path) -> Option<RecordedLayout> {
+    if let Some(id) = std::fs::read_to_string(dir.join("config.toml"))
+        .ok()
+        .and_then(|t| toml::from_str::<RunIdentity>(&t).ok())
+    {
+        let (w, h) = id.layout_size.split_once('x')?;
+        return Some(RecordedLayout {
+            name: id.layout,
+            width: w.parse().ok()?,
+            height: h.parse().ok()?,
+        });
+    }
+    let graph = planner::WorldGraph::load(&dir.join("graph.json")).ok()?;
+    let l = graph.layout();
+    Some(RecordedLayout {
+        name: l.name.clone(),
+        width: l.width,
+        height: l.height,
+    })
+}
+
+/// Refuses the world graph of the discover run `dir` for a run on `maze`
+/// (whose layout is `layout`) when it was discovered on a layout of
+/// another size: its `π_g` and graph do not fit. Warns when the size is
+/// the same but the layout's name differs. Says nothing when the run
+/// recorded no layout.
+pub fn check_world_graph_layout(dir: &Path, maze: Maze, layout: &Layout) -> anyhow::Result<()> {
+    let Some(l) = recorded_layout(dir) else {
+        return Ok(());
+    };
+    if (l.width, l.height) != (layout.width, layout.height) {
+        anyhow::bail!(
+            "the world graph {} is from maze {} ({}x{}), this run is {} ({}x{}): discover on \
+             --maze {} or train on the maze of the world graph",
+            dir.display(),
+            l.name,
+            l.width,
+            l.height,
+            maze.name(),
+            layout.width,
+            layout.height,
+            maze.name()
+        );
+    }
+    if l.name != maze.name() && l.name != layout.name {
+        eprintln!(
+            "warning: the world graph {} is from layout {}, this run is maze {} (of the same size)",
+            dir.display(),
+            l.name,
+            maze.name()
+        );
+    }
+    Ok(())
 }
 
 impl RunIdentity {
@@ -263,11 +342,23 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         cfg.gcp_iters_per_round = g;
     }
     let seed = cfg.seed;
+    anyhow::ensure!(
+        (1..=MAX_ENVS).contains(&a.envs),
+        "--envs {}: from 1 to {MAX_ENVS} environments",
+        a.envs
+    );
     let w = world(&a, seed);
     let (layout, env_cfg) = w.build()?;
     let dir = a.run_dir.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, cfg.seed))
     });
+    let own: Vec<String> = a
+        .config
+        .as_deref()
+        .and_then(|c| super::run_dir::name_in(&dir, c))
+        .into_iter()
+        .collect();
+    super::run_dir::check("--run", &dir, super::run_dir::RunKind::Discover, &own)?;
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     RunIdentity::new(&layout, a.envs, &cfg).check_and_record(&dir)?;
     let num_actions = env_cfg.task.num_actions();

@@ -241,17 +241,29 @@ impl Grid {
             self.name
         );
         anyhow::ensure!(!self.seeds.is_empty(), "seeds: at least one training seed");
-        for &s in &self.seeds {
+        for (i, &s) in self.seeds.iter().enumerate() {
             anyhow::ensure!(
                 s < super::train::MAX_TRAIN_SEED,
                 "seeds: {s} is not below {}",
                 super::train::MAX_TRAIN_SEED
+            );
+            // Two runs of one seed would share a run directory and a summary.
+            anyhow::ensure!(
+                !self.seeds[..i].contains(&s),
+                "seeds: {s} is listed twice (each training seed once)"
             );
         }
         anyhow::ensure!(
             self.validation_seeds > 0 && self.test_seeds > 0,
             "validation_seeds and test_seeds must be at least 1"
         );
+        let max = super::train::MAX_EVAL_SEEDS;
+        for (name, n) in [
+            ("validation_seeds", self.validation_seeds),
+            ("test_seeds", self.test_seeds),
+        ] {
+            anyhow::ensure!(n as u64 <= max, "{name} = {n}: at most {max} seeds");
+        }
         anyhow::ensure!(!self.maze.is_empty(), "[[maze]]: at least one maze");
         if let Some(c) = &self.discover_config {
             anyhow::ensure!(
@@ -259,6 +271,14 @@ impl Grid {
                 "discover_config: {} is not a file (paths are relative to the directory the command runs in)",
                 c.display()
             );
+            // The discoveries would refuse it one by one: refused here,
+            // `--dry-run` included.
+            super::discover::read_config(c)
+                .and_then(|cfg| {
+                    cfg.validate()
+                        .with_context(|| format!("{} is not a valid discovery config", c.display()))
+                })
+                .context("discover_config")?;
         }
         for (i, m) in self.maze.iter().enumerate() {
             anyhow::ensure!(
@@ -675,6 +695,54 @@ fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
     Ok(out)
 }
 
+/// The filters given, in words: `--maze medium --seed 7`.
+fn filters(a: &ExperimentArgs) -> String {
+    let mut v: Vec<String> = Vec::new();
+    v.extend(a.mazes.iter().map(|m| format!("--maze {}", m.name())));
+    v.extend(a.tasks.iter().map(|t| format!("--task {}", t.name())));
+    v.extend(a.configs.iter().map(|c| format!("--config {c}")));
+    v.extend(a.seeds.iter().map(|s| format!("--seed {s}")));
+    if v.is_empty() {
+        "none".to_string()
+    } else {
+        v.join(" ")
+    }
+}
+
+/// Each filter value the grid has no run of (`--seed 9` in a grid of
+/// seeds 0 to 2).
+fn unmatched_filters(grid: &Grid, a: &ExperimentArgs) -> Vec<String> {
+    let mazes = |g: &Group| -> Vec<Maze> {
+        if g.mazes.is_empty() {
+            grid.maze.iter().map(|m| m.name).collect()
+        } else {
+            g.mazes.clone()
+        }
+    };
+    let mut out = Vec::new();
+    for m in &a.mazes {
+        if !grid.group.iter().any(|g| mazes(g).contains(m)) {
+            out.push(format!("--maze {}", m.name()));
+        }
+    }
+    for t in &a.tasks {
+        if !grid.group.iter().any(|g| g.tasks.contains(t)) {
+            out.push(format!("--task {}", t.name()));
+        }
+    }
+    for c in &a.configs {
+        if !grid.group.iter().any(|g| g.configs.contains(c)) {
+            out.push(format!("--config {c}"));
+        }
+    }
+    for s in &a.seeds {
+        if !grid.seeds.contains(s) {
+            out.push(format!("--seed {s}"));
+        }
+    }
+    out
+}
+
 /// Set on SIGINT, SIGTERM or SIGHUP: stop the children and exit.
 fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
@@ -709,6 +777,16 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
         grid,
     };
     let all = jobs(&plan.grid, &a)?;
+    for f in unmatched_filters(&plan.grid, &a) {
+        eprintln!("warning: {f} matches no run of {}", grid_path.display());
+    }
+    if all.is_empty() {
+        eprintln!(
+            "warning: the filters ({}) select no run of {}",
+            filters(&a),
+            grid_path.display()
+        );
+    }
     // What is already done: a summary under results/ (training), or a
     // finished discovery in the working directory.
     let mut finished = vec![false; all.len()];
