@@ -81,7 +81,7 @@ fn a2c_learns_the_two_rooms() {
     let mut agent =
         HrlAgent::new(&config(AgentKind::A2c), &layout, Task::MultiGoal, None, 2).expect("agent");
     let before = test_score(&mut agent, &layout, env);
-    let _ = train(&mut agent, &layout, env, 2, 300);
+    let _ = train(&mut agent, &layout, env, 2, 400);
     let after = test_score(&mut agent, &layout, env);
     eprintln!("A2C on two rooms: mean test return {before:.3} → {after:.3}");
     assert!(
