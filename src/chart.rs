@@ -22,8 +22,9 @@ use sim::render::{Canvas, Rgb};
 /// `assets/fonts/LICENSE-DejaVu`).
 const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSansMono.ttf");
 
-/// Colours for successive series (matplotlib's tab10).
-pub const PALETTE: [Rgb; 8] = [
+/// Colours for successive series: matplotlib's tab10, so that the ten
+/// configurations of the paper's Table 1 each get their own.
+pub const PALETTE: [Rgb; 10] = [
     [31, 119, 180],
     [255, 127, 14],
     [44, 160, 44],
@@ -32,6 +33,8 @@ pub const PALETTE: [Rgb; 8] = [
     [140, 86, 75],
     [227, 119, 194],
     [127, 127, 127],
+    [188, 189, 34],
+    [23, 190, 207],
 ];
 
 /// One line of a chart.

@@ -149,16 +149,37 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
 }
 
 /// Every run summary under `root` (discovery summaries are skipped),
-/// sorted by path.
+/// sorted by path. Two summaries of the same run (configuration, maze, task
+/// and seed), such as a copy under another name or folder, are refused
+/// naming both files: each would count as a seed of its cell.
 pub fn read_all_runs(root: &Path) -> anyhow::Result<Vec<RunResult>> {
     let mut files = Vec::new();
     collect(root, &mut files)?;
     files.sort();
-    files
+    let mut seen: std::collections::BTreeMap<(String, String, String, u64), &Path> =
+        std::collections::BTreeMap::new();
+    let mut runs = Vec::new();
+    for p in files
         .iter()
         .filter(|p| p.parent().and_then(|d| d.file_name()) != Some("discover".as_ref()))
-        .map(|p| read_run(p))
-        .collect()
+    {
+        let r = read_run(p)?;
+        let key = (r.config.clone(), r.maze.clone(), r.task.clone(), r.seed);
+        if let Some(first) = seen.insert(key, p) {
+            anyhow::bail!(
+                "{} and {} are summaries of the same run (config {}, maze {}, task {}, seed {}); \
+                 remove one, or it is counted twice",
+                first.display(),
+                p.display(),
+                r.config,
+                r.maze,
+                r.task,
+                r.seed
+            );
+        }
+        runs.push(r);
+    }
+    Ok(runs)
 }
 
 fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {

@@ -509,3 +509,61 @@ fn a_command_writing_into_a_closed_pipe_ends_quietly() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
 }
+
+/// Issue 21, item 8: a layout file is refused once it is longer than any
+/// layout can be, not read whole first (`--layout /dev/zero` read 2 GB).
+#[test]
+fn a_layout_file_too_long_to_be_a_layout_is_refused_without_reading_it_whole() {
+    use crate::reliability::run_bounded_with_pid;
+    let dir = tempfile::tempdir().unwrap();
+    let long = write(dir.path(), "long.txt", &"#".repeat(1 << 20));
+    for path in [long.as_str(), "/dev/zero"] {
+        let (_, out) = run_bounded_with_pid(
+            &["sim", "trace", "--layout", path, "--actions", "2"],
+            std::time::Duration::from_secs(20),
+        );
+        assert!(!out.status.success(), "{path} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(path) && err.contains("longer than 65536 bytes"),
+            "{path}: {err}"
+        );
+    }
+}
+
+/// Issue 21, item 8: `run --threads 0` is refused before anything starts
+/// (the sim restarted in a loop, and with `--duration 1` the run exited 0
+/// having run nothing); `run --help` does not offer `--cpu` as if `run`
+/// took it.
+#[test]
+fn run_refuses_zero_threads_before_starting_and_its_help_says_cpu_is_for_one_role() {
+    use crate::reliability::run_bounded_with_pid;
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("r");
+    let name = format!("threads0-{}", std::process::id());
+    let (_, out) = run_bounded_with_pid(
+        &[
+            "run",
+            "--maze",
+            "small",
+            "--envs",
+            "8",
+            "--threads",
+            "0",
+            "--duration",
+            "1",
+            "--run",
+            &name,
+            "--run-dir",
+            run_dir.to_str().unwrap(),
+        ],
+        std::time::Duration::from_secs(30),
+    );
+    assert!(!out.status.success(), "--threads 0 accepted");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--threads must be at least 1"), "{err}");
+    assert!(!run_dir.exists(), "a refused run starts nothing");
+
+    let help = String::from_utf8_lossy(&worldgraph(&["run", "--help"]).stdout).into_owned();
+    assert!(help.contains("`run` refuses it"), "{help}");
+}

@@ -411,3 +411,50 @@ fn a_grid_is_checked_whole_at_load_and_filters_that_select_nothing_warn() {
     assert!(out.contains("small/multigoal/a2c/seed-0"), "{out}");
     assert!(!err.contains("warning"), "{err}");
 }
+
+/// Issue 21, item 4: a summary copied under another name or folder is the
+/// same run, refused naming both files rather than counted as a fourth
+/// seed. Item 8: `table` refuses an `--out` that is a directory before it
+/// writes any figure.
+#[test]
+fn table_refuses_a_summary_counted_twice_and_an_out_that_is_a_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let committed = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("results/stage2/small/multigoal/a2c/seed-0.json");
+    let cell = d.join("results/small/multigoal/a2c");
+    std::fs::create_dir_all(&cell).unwrap();
+    std::fs::copy(&committed, cell.join("seed-0.json")).unwrap();
+
+    // One summary: the table renders; `--out` a directory is refused first.
+    std::fs::create_dir_all(d.join("good")).unwrap();
+    let err = refused(&worldgraph(d, &["table", "results", "--out", "good"]));
+    assert!(err.contains("good") && err.contains("directory"), "{err}");
+    assert!(
+        !d.join("figures").exists() && std::fs::read_dir(d.join("good")).unwrap().next().is_none(),
+        "a refused table writes no figure"
+    );
+    ok(&worldgraph(
+        d,
+        &["table", "results", "--out", "out/results.md"],
+    ));
+
+    // The same summary under another name, then under another folder.
+    for copy in [
+        cell.join("seed-0-copy.json"),
+        d.join("results/old/seed-0.json"),
+    ] {
+        std::fs::create_dir_all(copy.parent().unwrap()).unwrap();
+        std::fs::copy(&committed, &copy).unwrap();
+        let err = refused(&worldgraph(
+            d,
+            &["table", "results", "--out", "out/results.md"],
+        ));
+        assert!(
+            err.contains("results/small/multigoal/a2c/seed-0.json")
+                && err.contains(&copy.strip_prefix(d).unwrap().display().to_string()),
+            "both files named: {err}"
+        );
+        std::fs::remove_file(&copy).unwrap();
+    }
+}

@@ -361,3 +361,69 @@ fn train_refuses_what_it_cannot_run_with_a_clear_message() {
         "agent.kind",
     );
 }
+
+/// Issue 21, item 8: the rounding of the budget is printed; a finished run
+/// rerun with a smaller budget is refused with its `config.toml` untouched;
+/// `evaluate` says when a run is unfinished.
+#[test]
+fn a_budget_is_rounded_aloud_and_a_smaller_one_leaves_a_finished_run_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path());
+    let r = dir.path().join("r");
+    let train = |env_steps: &str| {
+        worldgraph(&[
+            "train",
+            "--task",
+            "multigoal",
+            "--maze",
+            "small",
+            "--agent",
+            "a2c",
+            "--config",
+            &cfg,
+            "--env-steps",
+            env_steps,
+            "--run",
+            r.to_str().unwrap(),
+        ])
+    };
+    // 8 envs × 21 steps = 168 per iteration; eval_every 800 → 5 iterations
+    // (840 env steps) per segment; 1000 → 2 segments, 1680 env steps.
+    let out = train("1000");
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("budget of 1000 env steps rounds up to 1680"),
+        "{err}"
+    );
+    let config = read(&r.join("config.toml"));
+    assert!(config.contains("env_steps = 1000"), "{config}");
+    let test = test_json(&r);
+    assert_eq!(test["env_steps"], 1680, "{test}");
+
+    let out = train("800");
+    assert!(!out.status.success(), "a smaller budget was accepted");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("already trained 1680 env steps"), "{err}");
+    assert_eq!(
+        read(&r.join("config.toml")),
+        config,
+        "config.toml rewritten"
+    );
+
+    // A run whose budget is not trained yet (as a killed one): evaluate
+    // scores it and says it is unfinished.
+    std::fs::write(
+        r.join("config.toml"),
+        config.replace("env_steps = 1000", "env_steps = 5000"),
+    )
+    .unwrap();
+    let out = worldgraph(&["evaluate", r.to_str().unwrap(), "--seeds", "0..2"]);
+    let stdout = ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("unfinished (1680 of 5040 env steps trained)")
+            && stdout.contains("unfinished run"),
+        "{stdout}\n{err}"
+    );
+}

@@ -151,6 +151,12 @@ impl std::error::Error for LayoutError {}
 /// shared-memory schemas size their buffers by it).
 pub const MAX_SIDE: usize = 64;
 
+/// Largest layout file read (bytes): far above any [`MAX_SIDE`]-square
+/// layout, even with CRLF line ends and trailing blank lines. A longer file
+/// (or an endless one such as `/dev/zero`) is refused after reading this
+/// much, not read whole.
+pub const MAX_LAYOUT_FILE_BYTES: u64 = 64 * 1024;
+
 /// A parsed, validated maze layout: the initial grid and the agent's start.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Layout {
@@ -274,9 +280,29 @@ impl Layout {
 
     /// Reads and parses a layout file.
     pub fn from_file(path: &Path) -> Result<Layout, crate::SimError> {
-        let text = std::fs::read_to_string(path).map_err(|e| crate::SimError::Io {
+        use std::io::Read as _;
+        let io = |e: std::io::Error| crate::SimError::Io {
             path: path.display().to_string(),
             source: e,
+        };
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_LAYOUT_FILE_BYTES + 1).read_to_end(&mut bytes))
+            .map_err(io)?;
+        if bytes.len() as u64 > MAX_LAYOUT_FILE_BYTES {
+            return Err(io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "longer than {MAX_LAYOUT_FILE_BYTES} bytes: not a layout (at most \
+                     {MAX_SIDE}x{MAX_SIDE} cells)"
+                ),
+            )));
+        }
+        let text = String::from_utf8(bytes).map_err(|_| {
+            io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                "stream did not contain valid UTF-8",
+            ))
         })?;
         Ok(Layout::parse(&path.display().to_string(), &text)?)
     }

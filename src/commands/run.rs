@@ -170,6 +170,7 @@ impl RunCmdArgs {
         if let Some(d) = self.run.duration {
             anyhow::ensure!(d > 0.0, "--duration must be positive");
         }
+        anyhow::ensure!(self.threads >= 1, "--threads must be at least 1");
         refuse_live_run(&run)
     }
 

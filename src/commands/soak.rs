@@ -44,6 +44,28 @@ pub const RSS_GROWTH_LIMIT_KIB: i64 = 16 * 1024;
 /// How long a recovery may take before it counts as failed.
 pub const RECOVERY_LIMIT: Duration = Duration::from_secs(30);
 
+/// No kill in the soak's last this many seconds: a kill leaves its
+/// recovery this long to happen inside the soak (and the soak still waits
+/// for the recovery of its last kill, up to [`RECOVERY_LIMIT`]).
+pub const KILL_MARGIN_S: f64 = 5.0;
+
+/// True if a kill `at_s` seconds into a soak of `duration_s` seconds may be
+/// made: it leaves at least [`KILL_MARGIN_S`] before the end.
+pub fn kill_allowed(at_s: f64, duration_s: f64) -> bool {
+    at_s + KILL_MARGIN_S <= duration_s
+}
+
+/// The kill times of a soak of `duration_s` seconds killing every
+/// `every_s` seconds, each recovering at once (a slow recovery delays the
+/// kills after it): the schedule the soak follows through [`kill_allowed`].
+#[cfg(test)]
+pub fn kill_schedule(duration_s: f64, every_s: f64) -> Vec<f64> {
+    (1..)
+        .map(|k| k as f64 * every_s)
+        .take_while(|&t| kill_allowed(t, duration_s))
+        .collect()
+}
+
 /// `soak` options.
 #[derive(Debug, Clone, Args)]
 pub struct SoakArgs {
@@ -52,7 +74,9 @@ pub struct SoakArgs {
     /// Minutes to run.
     #[arg(long, default_value_t = 10.0)]
     pub minutes: f64,
-    /// SIGKILL a random process (sim, learner or planner) every this many seconds.
+    /// SIGKILL a random process (sim, learner or planner) every this many
+    /// seconds; none in the last 5 seconds, and the soak waits for the
+    /// recovery of its last kill.
     #[arg(long)]
     pub kill_every: Option<f64>,
     /// Environments in the batch.
@@ -218,7 +242,8 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         indicatif::ProgressStyle::with_template("soak {bar:40} {pos}/{len} s  {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    while Instant::now() < end && !stop.load(Ordering::Relaxed) {
+    // Past the end, the soak only waits for the recovery of its last kill.
+    while (Instant::now() < end || pending.is_some()) && !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
         let now = Instant::now();
         for (role, status) in p.poll_exited() {
@@ -284,6 +309,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         if pending.is_none()
             && let Some(k) = next_kill
             && now >= k
+            && kill_allowed((now - start).as_secs_f64(), a.minutes * 60.0)
         {
             let role = Role::ALL[rng.random_range(0..Role::ALL.len())];
             let before = last_progress(&stats);
@@ -525,4 +551,33 @@ fn print_report(r: &SoakReport, dir: &Path) {
         }
     }
     println!("  result: {}", if r.ok { "OK" } else { "FAILED" });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 21, item 7: `--minutes 1 --kill-every 20` killed at 60.0 s, the
+    /// instant the soak ended, and reported it NOT recovered.
+    #[test]
+    fn no_kill_is_scheduled_in_the_soaks_last_seconds() {
+        assert_eq!(kill_schedule(60.0, 20.0), [20.0, 40.0]);
+        assert_eq!(kill_schedule(60.0, 25.0), [25.0, 50.0]);
+        assert_eq!(kill_schedule(60.0, 30.0), [30.0]);
+        assert_eq!(kill_schedule(600.0, 30.0).len(), 19);
+        assert!(kill_schedule(4.0, 2.0).is_empty());
+        for (minutes, every) in [(1.0, 20.0), (0.4, 6.0), (10.0, 30.0), (2.0, 7.5)] {
+            let duration = minutes * 60.0;
+            for t in kill_schedule(duration, every) {
+                assert!(
+                    t + KILL_MARGIN_S <= duration,
+                    "kill at {t} s of {duration} s"
+                );
+            }
+        }
+        // A kill delayed by a slow recovery into the last seconds is skipped.
+        assert!(kill_allowed(55.0, 60.0));
+        assert!(!kill_allowed(55.1, 60.0));
+        assert!(!kill_allowed(60.0, 60.0));
+    }
 }

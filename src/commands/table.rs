@@ -237,6 +237,12 @@ fn first_reach(r: &RunResult, threshold: f64) -> Option<(u64, f64)> {
 
 /// Runs `worldgraph table`.
 pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
+    anyhow::ensure!(
+        !a.out.is_dir(),
+        "--out {} is a directory; name the Markdown file to write (e.g. {}/results.md)",
+        a.out.display(),
+        a.out.display()
+    );
     let runs = read_all_runs(&a.results)?;
     anyhow::ensure!(
         !runs.is_empty(),

@@ -104,7 +104,10 @@ pub struct TrainArgs {
     /// `config.toml` a run writes; unknown fields are refused).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Env-step budget [default: the --config file's, else 1,000,000].
+    /// Env-step budget [default: the --config file's, else 1,000,000],
+    /// rounded up to whole validation segments: `eval_every` rounded up to
+    /// whole iterations of envs × rollout_len env steps (so 2000 trains
+    /// 51,840 with the defaults); `train` prints the rounding.
     #[arg(long)]
     pub env_steps: Option<u64>,
     /// Run directory: new, empty, or a train run to resume (any other
@@ -648,6 +651,14 @@ fn mean_row(stats: &[IterationStats]) -> MetricsRow {
     }
 }
 
+/// The env steps a run of `cfg` trains: its budget rounded up to whole
+/// segments of whole iterations.
+pub fn trained_env_steps(cfg: &TrainConfig) -> u64 {
+    let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
+    let per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1) * steps_per_iter;
+    cfg.env_steps.div_ceil(per_segment) * per_segment
+}
+
 /// Runs `worldgraph train`.
 pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(
@@ -719,7 +730,26 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         Ok(Some(old))
     };
-    read_state()?;
+    let trained = trained_env_steps(&cfg);
+    if let Some(old) = read_state()?
+        && old.env_steps > trained
+    {
+        bail!(
+            "{} already trained {} env steps, more than --env-steps {} ({trained} rounded); \
+             give at least {} to go on, or another --run (its config.toml is left as it is)",
+            dir.display(),
+            old.env_steps,
+            cfg.env_steps,
+            old.env_steps
+        );
+    }
+    if trained != cfg.env_steps {
+        eprintln!(
+            "train: the budget of {} env steps rounds up to {trained}: whole segments of eval_every {} \
+             rounded up to whole iterations of {} envs × {} steps",
+            cfg.env_steps, cfg.eval_every, cfg.agent.envs, cfg.agent.rollout_len
+        );
+    }
     let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
 
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -1145,6 +1175,19 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             )
         })?)?;
     let id = &state.identity;
+    // The budget is in the run's config.toml (the identity holds 0).
+    let budget = read_config(&a.run.join("config.toml"))
+        .ok()
+        .map(|c| trained_env_steps(&c));
+    let unfinished = budget.filter(|&b| state.env_steps < b);
+    if let Some(b) = unfinished {
+        eprintln!(
+            "evaluate: {} is unfinished ({} of {b} env steps trained): scoring its best \
+             checkpoint so far",
+            a.run.display(),
+            state.env_steps
+        );
+    }
     // A Door-Key run records its layout, `<maze>-doorkey`.
     let maze: Maze = id
         .maze
@@ -1185,17 +1228,56 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     if a.json {
         println!(
             "{}",
-            serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores})
+            serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": unfinished.is_none(), "env_steps": state.env_steps})
         );
     } else {
         println!(
-            "{}: score {:.3} on test seeds {} ({} episode(s) per seed)",
+            "{}: score {:.3} on test seeds {} ({} episode(s) per seed){}",
             a.run.display(),
             score,
             a.seeds,
-            a.episodes_per_seed
+            a.episodes_per_seed,
+            match unfinished {
+                Some(b) => format!(" (unfinished run: {} of {b} env steps)", state.env_steps),
+                None => String::new(),
+            }
         );
     }
     let _ = BatchEnvironment::num_envs(&env);
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 21, item 8: the budget a run trains is its rounding to whole
+    /// segments (`--env-steps 2000` trains 51,840 with the defaults).
+    #[test]
+    fn the_budget_rounds_up_to_whole_segments() {
+        for (budget, trained) in [(2000, 51_840), (51_840, 51_840), (51_841, 2 * 51_840)] {
+            let cfg = TrainConfig {
+                env_steps: budget,
+                ..TrainConfig::default()
+            };
+            assert_eq!(trained_env_steps(&cfg), trained, "{budget}");
+        }
+    }
+
+    /// Issue 21, item 8: the config's agent kind may be spelled as the
+    /// CLI's `--agent` spells it.
+    #[test]
+    fn the_config_accepts_the_clis_agent_kinds() {
+        for (text, kind) in [
+            ("fn", AgentKind::Feudal),
+            ("feudal", AgentKind::Feudal),
+            ("wn", AgentKind::WideNarrow),
+            ("wide-narrow", AgentKind::WideNarrow),
+            ("a2c", AgentKind::A2c),
+        ] {
+            let cfg: TrainConfig = toml::from_str(&format!("[agent]\nkind = \"{text}\"\n"))
+                .unwrap_or_else(|e| panic!("kind = {text:?}: {e}"));
+            assert_eq!(cfg.agent.kind, kind, "{text}");
+        }
+    }
 }

@@ -118,7 +118,8 @@ pub struct RunArgs {
     pub duration: Option<f64>,
     /// Pin this process to one CPU (its id as the kernel numbers them), e.g.
     /// to keep the busy-polling sim and learner on separate cores of a
-    /// larger machine (`run --pin` does it for both).
+    /// larger machine. Only for a single role (`sim`, `learner`, `planner
+    /// serve`); `run` refuses it (`run --pin` pins the sim and the learner).
     #[arg(long)]
     pub cpu: Option<usize>,
 }

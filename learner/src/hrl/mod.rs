@@ -59,8 +59,10 @@ pub enum AgentKind {
     /// The A2C-LSTM baseline.
     A2c,
     /// The Feudal Network: Manager over every valid cell, Worker.
+    #[serde(alias = "fn")]
     Feudal,
     /// Wide-then-Narrow Manager, Worker.
+    #[serde(alias = "wn")]
     WideNarrow,
 }
 
