@@ -590,6 +590,52 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             let _ = writeln!(md, "### {m}, {t}\n\n{}\n", links.join("\n"));
         }
     }
+    // Every configuration's curve, against env steps and against wall
+    // seconds.
+    let _ = writeln!(
+        md,
+        "## Learning curves of every configuration\n\n\
+         Validation score, the mean over seeds with a band of ± one (sample) std, against env \
+         steps and against training wall seconds (the seeds' mean at each validation).\n"
+    );
+    for (m, t) in &pairs {
+        // Table 1's order, then any other configuration of the cell.
+        let mut configs: Vec<String> = TABLE1_CONFIGS.iter().map(|c| c.to_string()).collect();
+        for (mm, tt, c) in cells.keys() {
+            if (mm, tt) == (m, t) && !configs.contains(c) {
+                configs.push(c.clone());
+            }
+        }
+        configs.retain(|c| cells.contains_key(&(m.clone(), t.clone(), c.clone())));
+        if configs.is_empty() {
+            continue;
+        }
+        let mut links = Vec::new();
+        for (axis, label) in [("env-steps", "env steps"), ("wall-seconds", "wall seconds")] {
+            let bands: Vec<Band> = configs
+                .iter()
+                .map(|c| {
+                    let rs = &cells[&(m.clone(), t.clone(), c.to_string())];
+                    let name = display_config(c);
+                    match axis {
+                        "env-steps" => mean_band(&name, rs),
+                        _ => mean_band_over(&name, rs, |p| p.wall_seconds),
+                    }
+                })
+                .collect();
+            let file = format!("curves-{m}-{t}-{axis}.png");
+            let chart = LineChart {
+                title: format!("{m} {t}: validation score against {label}"),
+                x_label: label.into(),
+                y_label: "validation score".into(),
+                series: Vec::new(),
+                x_scale: XScale::Linear,
+            };
+            band_chart(&chart, &bands, 1000, 480).save_png(&figures.join(&file))?;
+            links.push(format!("![{m} {t}: against {label}]({fig_link}/{file})"));
+        }
+        let _ = writeln!(md, "### {m}, {t}\n\n{}\n", links.join("\n"));
+    }
     write_atomic(&a.out, md.as_bytes())?;
     eprintln!(
         "table: {} runs in {} cells → {} (figures in {})",
@@ -628,6 +674,17 @@ const FIGURE4: [(&str, &str, &[&str]); 4] = [
 /// The mean validation curve of a cell's seeds with ± one sample std, at
 /// the env steps every seed reached.
 fn mean_band(name: &str, rs: &[&RunResult]) -> Band {
+    mean_band_over(name, rs, |p| p.env_steps as f64)
+}
+
+/// The mean ± std band of `rs`' validation curves, the i-th points of the
+/// runs matched, at x = the runs' mean of `x` at that point (env steps are
+/// the same in every run; wall seconds differ, so they are averaged).
+fn mean_band_over(
+    name: &str,
+    rs: &[&RunResult],
+    x: impl Fn(&crate::results::CurvePoint) -> f64,
+) -> Band {
     let len = rs
         .iter()
         .map(|r| r.validation_curve.len())
@@ -638,8 +695,9 @@ fn mean_band(name: &str, rs: &[&RunResult]) -> Band {
         points: (0..len)
             .map(|i| {
                 let ys: Vec<f64> = rs.iter().map(|r| r.validation_curve[i].score).collect();
+                let xs: Vec<f64> = rs.iter().map(|r| x(&r.validation_curve[i])).collect();
                 let (m, s) = mean_std(&ys);
-                (rs[0].validation_curve[i].env_steps as f64, m, m - s, m + s)
+                (mean_std(&xs).0, m, m - s, m + s)
             })
             .collect(),
     }
