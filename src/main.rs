@@ -22,11 +22,27 @@ mod world;
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the
 /// paths between them) and use it to make hierarchical RL fast.
 #[derive(Debug, Parser)]
-#[command(name = "worldgraph", version, about, long_about = None, propagate_version = true)]
+#[command(
+    name = "worldgraph",
+    version,
+    about,
+    long_about = None,
+    propagate_version = true,
+    after_help = ENVIRONMENT
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
+
+/// The environment variables every command reads (`--help`'s epilogue).
+const ENVIRONMENT: &str = "\
+Environment:
+  WORLDGRAPH_TORCH_THREADS  libtorch's intra-op threads of this process [default: 1]
+  WORLDGRAPH_LOG            the log filter, tracing's EnvFilter syntax (e.g. debug, learner=debug) [default: info]
+  WORLDGRAPH_CACHE          where scripts/setup-libtorch.sh keeps libtorch [default: ~/.cache/worldgraph]
+  WORLDGRAPH_FIRST_LAYER    dense: the plain first convolution instead of gather-and-sum (measurements)
+  WORLDGRAPH_GRAD_PATH      bench learner's fast path: recompute or per-step [default: per-step]";
 
 #[derive(Debug, Subcommand)]
 enum Command {

@@ -567,3 +567,21 @@ fn run_refuses_zero_threads_before_starting_and_its_help_says_cpu_is_for_one_rol
     let help = String::from_utf8_lossy(&worldgraph(&["run", "--help"]).stdout).into_owned();
     assert!(help.contains("`run` refuses it"), "{help}");
 }
+
+#[test]
+fn help_lists_the_environment_variables_the_commands_read() {
+    let out = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .arg("--help")
+        .output()
+        .expect("run worldgraph");
+    let help = String::from_utf8_lossy(&out.stdout);
+    for var in [
+        "WORLDGRAPH_TORCH_THREADS",
+        "WORLDGRAPH_LOG",
+        "WORLDGRAPH_CACHE",
+        "WORLDGRAPH_FIRST_LAYER",
+        "WORLDGRAPH_GRAD_PATH",
+    ] {
+        assert!(help.contains(var), "{var} is not in --help:\n{help}");
+    }
+}

@@ -427,3 +427,35 @@ fn a_budget_is_rounded_aloud_and_a_smaller_one_leaves_a_finished_run_alone() {
         "{stdout}\n{err}"
     );
 }
+
+#[test]
+fn any_setting_can_be_set_from_the_command_line_and_printed_resolved() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("never");
+    let out = ok(&worldgraph(&[
+        "train",
+        "--agent",
+        "wn",
+        "--set",
+        "agent.worker.learning_rate=3e-4",
+        "--set",
+        "eval_every = 1000",
+        "--set",
+        "agent.kind=wide-narrow",
+        "--run",
+        run.to_str().unwrap(),
+        "--print-config",
+    ]));
+    let printed: toml::Table = toml::from_str(&out).expect("the printed settings are TOML");
+    assert_eq!(printed["eval_every"].as_integer(), Some(1000), "{out}");
+    assert_eq!(
+        printed["agent"]["worker"]["learning_rate"].as_float(),
+        Some(3e-4),
+        "{out}"
+    );
+    assert!(!run.exists(), "--print-config writes nothing");
+    let bad = worldgraph(&["train", "--set", "agent.worker.lr=3e-4", "--print-config"]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("agent.worker.lr"), "{err}");
+}

@@ -46,6 +46,8 @@ fn train(a: &DemoArgs, agent: AgentArg, graph: &Path, name: &str) -> anyhow::Res
         run: Some(run.clone()),
         pipeline: false,
         json: false,
+        set: Vec::new(),
+        print_config: false,
     })?;
     Ok(serde_json::from_slice(&std::fs::read(
         run.join("test.json"),

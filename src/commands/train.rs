@@ -116,12 +116,24 @@ pub struct TrainArgs {
     #[arg(long)]
     pub run: Option<PathBuf>,
     /// Step the training environments in a sim process over shared memory
-    /// (one per segment); same result as in-process for the same seed.
+    /// (one for the whole run); same result as in-process for the same
+    /// seed.
     #[arg(long)]
     pub pipeline: bool,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Set one field of the training settings, as a dotted TOML path and a
+    /// TOML value (repeatable; applied over --config, before the options
+    /// above): `--set agent.worker.learning_rate=3e-4`, `--set
+    /// eval_every=100000`, `--set agent.horizon=15`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Print the resolved training settings (TOML, as the run's
+    /// `config.toml` would hold them) and exit without training or writing
+    /// anything.
+    #[arg(long)]
+    pub print_config: bool,
 }
 
 /// Everything `train` is configured by (the run's `config.toml`).
@@ -313,6 +325,52 @@ fn check_budget(cfg: &TrainConfig, file: Option<&Path>) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The training settings of `--config` (or the defaults) with every
+/// `--set KEY=VALUE` applied: each names a dotted path into the TOML and a
+/// TOML value (a bare word that is not one is taken as a string).
+pub fn config_with_overrides(
+    file: Option<&Path>,
+    overrides: &[String],
+) -> anyhow::Result<TrainConfig> {
+    let base = match file {
+        Some(p) => read_config(p)?,
+        None => TrainConfig::default(),
+    };
+    if overrides.is_empty() {
+        return Ok(base);
+    }
+    let mut doc = toml::Value::try_from(&base).context("the settings do not serialise")?;
+    for o in overrides {
+        let (key, value) = o
+            .split_once('=')
+            .with_context(|| format!("--set {o}: expected KEY=VALUE, e.g. agent.horizon=15"))?;
+        let (key, value) = (key.trim(), value.trim());
+        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut at = &mut doc;
+        let parts: Vec<&str> = key.split('.').collect();
+        for (i, part) in parts.iter().enumerate() {
+            let table = at
+                .as_table_mut()
+                .with_context(|| format!("--set {o}: {} is not a table", parts[..i].join(".")))?;
+            if i + 1 == parts.len() {
+                anyhow::ensure!(
+                    table.contains_key(*part),
+                    "--set {o}: the training settings have no field {key}"
+                );
+                table.insert(part.to_string(), value.clone());
+                break;
+            }
+            at = table
+                .get_mut(*part)
+                .with_context(|| format!("--set {o}: the training settings have no field {key}"))?;
+        }
+    }
+    TrainConfig::deserialize(doc).map_err(|e| anyhow::anyhow!("--set: {}", e.message()))
 }
 
 /// Reads a TOML config file.
@@ -665,16 +723,17 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         a.seed < MAX_TRAIN_SEED,
         "--seed must be below {MAX_TRAIN_SEED} (higher streams hold the validation and test seeds)"
     );
-    let mut cfg = match &a.config {
-        Some(p) => read_config(p)?,
-        None => TrainConfig::default(),
-    };
+    let mut cfg = config_with_overrides(a.config.as_deref(), &a.set)?;
     cfg.agent = agent_config(&a, &cfg.agent);
     if let Some(s) = a.env_steps {
         cfg.env_steps = s;
     }
     cfg.agent.validate()?;
     check_budget(&cfg, a.config.as_deref())?;
+    if a.print_config {
+        print!("{}", toml::to_string(&cfg)?);
+        return Ok(std::process::ExitCode::SUCCESS);
+    }
     let layout = a.maze.layout(a.task.uses_door_key_layout());
     let env_cfg = EnvConfig::for_task(a.task, &layout);
     let dir = run_dir(&a, &layout, &cfg.agent);
