@@ -1201,20 +1201,22 @@ impl HrlAgent {
         if train {
             // Truncation is not termination (Gymnasium's final_obs): the
             // cut steps' targets go on from their final states' values.
-            let goals = self.goal_marks(ctl);
-            let marks = self.hierarchical().then(|| GoalMarks {
-                cells: &goals,
-                per_env: self.slots(),
-            });
-            bootstrap_truncated(
-                &mut rewards,
-                &self.worker,
-                &obs,
-                marks,
-                &out_state,
-                &cut_worker,
-                self.cfg.worker.gamma,
-            );
+            if !cut_worker.is_empty() {
+                let goals = self.goal_marks(ctl);
+                let marks = self.hierarchical().then(|| GoalMarks {
+                    cells: &goals,
+                    per_env: self.slots(),
+                });
+                bootstrap_truncated(
+                    &mut rewards,
+                    &self.worker,
+                    &obs,
+                    marks,
+                    &out_state,
+                    &cut_worker,
+                    self.cfg.worker.gamma,
+                );
+            }
             if let Some(manager) = &self.manager
                 && !cut_manager.is_empty()
             {
