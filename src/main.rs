@@ -17,6 +17,7 @@ mod pipeline;
 mod progress;
 mod results;
 mod roles;
+mod stats;
 mod world;
 
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the

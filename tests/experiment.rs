@@ -192,6 +192,39 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         let png = std::fs::read(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
         assert_eq!(&png[1..4], b"PNG", "{f}");
     }
+    // The rliable aggregates: one run per cell, so the IQM is the score
+    // and its interval a point; the probability of improvement of the
+    // hierarchy over A2C is 1, ½ or 0 as their test scores compare.
+    let (a2c_score, wn_score) = (
+        a2c["test_score"].as_f64().unwrap(),
+        wn["test_score"].as_f64().unwrap(),
+    );
+    let iqm = format!(
+        "| small | multigoal | A2C | 1 | {a2c_score:.3} [{a2c_score:.3}, {a2c_score:.3}] |"
+    );
+    assert!(md.contains(&iqm), "{iqm} not in\n{md}");
+    let p = if wn_score > a2c_score {
+        1.0
+    } else if wn_score == a2c_score {
+        0.5
+    } else {
+        0.0
+    };
+    let poi =
+        format!("| WN V_p + traversal + π_g init over A2C | 1 | 1 / 1 | {p:.2} [{p:.2}, {p:.2}] |");
+    assert!(md.contains(&poi), "{poi} not in\n{md}");
+    // scores.csv: a header and one row per run that pandas reads as is.
+    let csv = std::fs::read_to_string(d.join("results/scores.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 3, "{csv}");
+    assert!(
+        lines[0].starts_with("maze,task,config,seed,test_score,"),
+        "{csv}"
+    );
+    let a2c_row: Vec<&str> = lines[1].split(',').collect();
+    assert_eq!(&a2c_row[..4], ["small", "multigoal", "a2c", "0"], "{csv}");
+    assert_eq!(a2c_row[4].parse::<f64>().unwrap(), a2c_score);
+    assert_eq!(a2c_row.len(), lines[0].split(',').count());
 }
 
 #[test]

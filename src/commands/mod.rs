@@ -1,5 +1,6 @@
 //! One module per top-level command.
 
+pub mod aggregate;
 pub mod bench;
 pub mod bench_learner;
 pub mod bench_pipeline;

@@ -33,6 +33,11 @@ pub struct TableArgs {
     /// best validation score any configuration reached there.
     #[arg(long, default_value_t = 0.9)]
     pub threshold: f64,
+    /// The tidy per-run CSV written (one row per run: maze, task, config,
+    /// seed, test score, budget, wall time, commit ...) [default:
+    /// `scores.csv` in the results directory].
+    #[arg(long)]
+    pub scores: Option<PathBuf>,
 }
 
 /// Table 1's rows, in the paper's order.
@@ -403,6 +408,14 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         let _ = writeln!(md);
     }
 
+    // The rliable protocol's aggregates.
+    md.push_str(&super::aggregate::section(&runs, display_config, |c| {
+        TABLE1_CONFIGS
+            .iter()
+            .position(|x| *x == c)
+            .unwrap_or(usize::MAX)
+    }));
+
     // What each cell cost.
     let _ = writeln!(
         md,
@@ -637,12 +650,21 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         let _ = writeln!(md, "### {m}, {t}\n\n{}\n", links.join("\n"));
     }
     write_atomic(&a.out, md.as_bytes())?;
+    let scores = a
+        .scores
+        .clone()
+        .unwrap_or_else(|| a.results.join("scores.csv"));
+    write_atomic(
+        &scores,
+        super::aggregate::scores_csv(&runs, PAPER_ITERATIONS).as_bytes(),
+    )?;
     eprintln!(
-        "table: {} runs in {} cells → {} (figures in {})",
+        "table: {} runs in {} cells → {} (figures in {}, one row per run in {})",
         runs.len(),
         cells.len(),
         a.out.display(),
-        figures.display()
+        figures.display(),
+        scores.display()
     );
     Ok(std::process::ExitCode::SUCCESS)
 }
