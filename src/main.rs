@@ -18,6 +18,7 @@ mod progress;
 mod results;
 mod roles;
 mod stats;
+mod update_log;
 mod world;
 
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the

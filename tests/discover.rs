@@ -98,7 +98,25 @@ fn discovery_gives_the_same_graph_in_process_and_over_the_pipeline() {
                 "{run}/{file} missing"
             );
         }
+        // Issue 21: the pictures carry a title and a legend, so they are
+        // taller than the maze drawn at 24 px a cell.
+        let maze = sim::Maze::Small.layout(false);
+        for file in ["graph.png", "pivotal.png"] {
+            let (w, h) = png_size(&dir.path().join(run).join(file));
+            assert!(
+                w >= 480 && h > maze.height as u32 * 24 + 100,
+                "{run}/{file} is {w}×{h}: no caption"
+            );
+        }
     }
+}
+
+/// A PNG's width and height, from its header.
+pub fn png_size(path: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(&bytes[1..4], b"PNG", "{} is not a PNG", path.display());
+    let be = |k: usize| u32::from_be_bytes([bytes[k], bytes[k + 1], bytes[k + 2], bytes[k + 3]]);
+    (be(16), be(20))
 }
 
 #[test]

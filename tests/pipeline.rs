@@ -210,6 +210,13 @@ fn the_three_roles_exchange_data_through_shared_memory() {
     ] {
         assert!(dir.path().join(f).exists(), "{f} written");
     }
+    // Issue 21: the planner's picture of its graph has a title and a legend.
+    let (w, h) = super::discover::png_size(&dir.path().join("graph.png"));
+    let maze = sim::Maze::Small.layout(false);
+    assert!(
+        w >= 480 && h > maze.height as u32 * 24 + 100,
+        "graph.png is {w}×{h}: no caption"
+    );
     assert!(
         stdout.contains("shared-memory files left behind"),
         "{stdout}"

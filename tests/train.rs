@@ -286,6 +286,36 @@ fn a_killed_run_resumes_and_ends_as_an_uninterrupted_one() {
         test_json(&whole)["test_score"],
         test_json(&killed)["test_score"]
     );
+    // The per-update log is the uninterrupted run's, row for row, but for
+    // the wall clock (columns wall_seconds and sps), and TensorBoard's
+    // events are there; each start recorded its command line and commit.
+    let learning = |run: &Path| -> Vec<String> {
+        read(&run.join("updates.csv"))
+            .lines()
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                let mut keep = vec![f[0], f[1]];
+                keep.extend(&f[3..f.len() - 1]);
+                keep.join(",")
+            })
+            .collect()
+    };
+    let rows = learning(&whole);
+    assert_eq!(rows.len(), 1 + 20, "{rows:?}");
+    assert!(rows[0].starts_with("update,env_steps,episodes,episodic_return,policy_loss"));
+    assert_eq!(rows, learning(&killed));
+    for run in [&whole, &killed] {
+        let tb: Vec<_> = std::fs::read_dir(run.join("tensorboard"))
+            .unwrap()
+            .collect();
+        assert_eq!(tb.len(), 1);
+    }
+    let invocations = read(&killed.join("invocations.txt"));
+    assert_eq!(invocations.lines().count(), 2, "{invocations}");
+    assert!(
+        invocations.contains("(commit ") && invocations.contains(" train "),
+        "{invocations}"
+    );
     // Traversal happened, and the world graph came from the discovery run.
     let metrics = read(&whole.join("metrics.csv"));
     let traversal: f64 = metrics
@@ -458,4 +488,122 @@ fn any_setting_can_be_set_from_the_command_line_and_printed_resolved() {
     assert!(!bad.status.success());
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("agent.worker.lr"), "{err}");
+}
+
+/// `train --print-config` with `extra`, parsed.
+fn printed_config(extra: &[&str]) -> toml::Table {
+    let mut args = vec!["train", "--print-config"];
+    args.extend(extra);
+    let out = ok(&worldgraph(&args));
+    toml::from_str(&out).unwrap_or_else(|e| panic!("{e}:\n{out}"))
+}
+
+fn agent_int(t: &toml::Table, key: &str) -> i64 {
+    t["agent"][key]
+        .as_integer()
+        .unwrap_or_else(|| panic!("agent.{key}: {t}"))
+}
+
+/// Issue 21: `--print-config` and a run's `config.toml` hold what
+/// `0 = auto` resolved to (the horizon a third of the rollout, the window
+/// from the world graph's candidates); a resume with the same command line
+/// (auto again), with the values given explicitly, or of a run recorded
+/// with 0 goes on; another value is refused. The pictures are captioned.
+#[test]
+fn resolved_settings_are_written_and_a_run_resumes_under_auto_or_explicit_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path());
+    let graph = discovery_files(dir.path());
+    let g = graph.to_str().unwrap();
+    // V_all needs no world graph; V_p's window comes from it.
+    let all = printed_config(&["--agent", "wn", "--candidates", "all", "--config", &cfg]);
+    assert_eq!(agent_int(&all, "horizon"), 7, "a third of rollout_len 21");
+    let side = agent_int(&all, "window");
+    assert!(side >= 5 && side % 2 == 1, "{all}");
+    let vp = printed_config(&["--agent", "wn", "--world-graph", g, "--config", &cfg]);
+    assert_eq!(agent_int(&vp, "horizon"), 7);
+    let window = agent_int(&vp, "window");
+    assert!(window >= 5 && window % 2 == 1, "{vp}");
+    let a2c = printed_config(&["--agent", "a2c", "--config", &cfg]);
+    assert_eq!(
+        (agent_int(&a2c, "horizon"), agent_int(&a2c, "window")),
+        (0, 0),
+        "A2C has no Manager and no window"
+    );
+
+    let run = dir.path().join("r");
+    let train = |budget: &str, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--task",
+            "multigoal",
+            "--maze",
+            "small",
+            "--agent",
+            "wn",
+            "--world-graph",
+            g,
+            "--config",
+            &cfg,
+            "--run",
+            run.to_str().unwrap(),
+            "--env-steps",
+            budget,
+        ];
+        args.extend(extra);
+        worldgraph(&args)
+    };
+    let resumed = |out: &Output| {
+        ok(out);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("resuming"), "{err}");
+    };
+    ok(&train("800", &[]));
+    let written: toml::Table = toml::from_str(&read(&run.join("config.toml"))).unwrap();
+    assert_eq!(agent_int(&written, "horizon"), 7, "{written}");
+    assert_eq!(
+        agent_int(&written, "window"),
+        window,
+        "as printed: {written}"
+    );
+    assert_eq!(
+        test_json(&run)["window_side"],
+        window,
+        "the side the agent used"
+    );
+    resumed(&train("1600", &[]));
+    let explicit = format!("agent.window={window}");
+    resumed(&train(
+        "2400",
+        &["--set", "agent.horizon=7", "--set", &explicit],
+    ));
+    let other = train("3200", &["--set", "agent.horizon=5"]);
+    assert!(!other.status.success(), "another horizon was resumed");
+    let err = String::from_utf8_lossy(&other.stderr);
+    assert!(err.contains("agent.horizon"), "{err}");
+    // A run recorded before the values were resolved says 0.
+    let state = run.join("checkpoint").join("state.json");
+    let mut s: serde_json::Value = serde_json::from_str(&read(&state)).unwrap();
+    s["identity"]["config"]["agent"]["horizon"] = 0.into();
+    s["identity"]["config"]["agent"]["window"] = 0.into();
+    std::fs::write(&state, serde_json::to_vec(&s).unwrap()).unwrap();
+    resumed(&train("3200", &[]));
+    assert_eq!(read(&run.join("metrics.csv")).lines().count(), 1 + 4);
+
+    // The episode picture is captioned, and its trace holds the grids.
+    let (w, h) = super::discover::png_size(&run.join("episode.png"));
+    let maze = Maze::Small.layout(false);
+    assert!(
+        w >= 480 && h > maze.height as u32 * 28 + 100,
+        "episode.png is {w}×{h}: no caption"
+    );
+    let trace: serde_json::Value =
+        serde_json::from_str(&read(&run.join("test_episode.json"))).unwrap();
+    for grid in ["start_cells", "end_cells"] {
+        assert_eq!(
+            trace[grid].as_array().map(Vec::len),
+            Some(maze.cells.len()),
+            "{grid}"
+        );
+    }
 }

@@ -852,6 +852,12 @@ impl WorldGraph {
 
     // ------------------------------------------------------------ picture --
 
+    /// Colours of [`WorldGraph::render`]'s edges: the lightest edge's (dark
+    /// blue) and the heaviest's (light blue); the others lie between.
+    pub const EDGE_COLOURS: (Rgb, Rgb) = ([20, 50, 170], [150, 175, 225]);
+    /// Colour of [`WorldGraph::render`]'s node discs (on a white ring).
+    pub const NODE_COLOUR: Rgb = [200, 30, 110];
+
     /// The maze with the graph drawn on it, `px` pixels per cell: each edge
     /// along its path, through the cells it visits (dark for light edges,
     /// pale for heavy ones; every segment is offset to the left of its
@@ -876,7 +882,7 @@ impl WorldGraph {
             } else {
                 0.0
             };
-            let colour = lerp([20, 50, 170], [150, 175, 225], t);
+            let colour = lerp(Self::EDGE_COLOURS.0, Self::EDGE_COLOURS.1, t);
             // The cells the path passes, each once in a row (turns stay).
             let mut cells = vec![self.nodes()[e.from.index()]];
             for &c in &e.cells {
@@ -912,7 +918,7 @@ impl WorldGraph {
         for &c in self.nodes() {
             let (x, y) = centre(c);
             canvas.fill_disc(x, y, s * 0.3, [255, 255, 255], 1.0);
-            canvas.fill_disc(x, y, s * 0.24, [200, 30, 110], 1.0);
+            canvas.fill_disc(x, y, s * 0.24, Self::NODE_COLOUR, 1.0);
         }
         canvas
     }

@@ -10,11 +10,13 @@ use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
 use serde::Serialize;
-use sim::render::{Canvas, draw_grid};
+use sim::render::{Canvas, Rgb, draw_grid, object_color};
 use sim::{Layout, Maze, Object, Task};
 
 use super::run::teardown;
-use crate::chart::{LineChart, Series, XScale};
+use crate::chart::{
+    LegendEntry, LineChart, Mark, Series, XScale, blended, captioned, object_entries,
+};
 use crate::pipeline::{Pipeline, Role, world_words};
 use crate::world::WorldArgs;
 
@@ -507,9 +509,9 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         &dir.join("discovery.json"),
         &serde_json::to_vec_pretty(&summary)?,
     )?;
-    render_pivotal(&layout, &disc.prior_means(), pivotal, &graph)
+    pivotal_picture(&layout, &disc.prior_means(), pivotal, &graph, seed)
         .save_png(&dir.join("pivotal.png"))?;
-    render_graph(&graph).save_png(&dir.join("graph.png"))?;
+    graph_picture(&graph, true).save_png(&dir.join("graph.png"))?;
     curves(&history)
         .render(900, 520)
         .save_png(&dir.join("discovery_curves.png"))?;
@@ -602,7 +604,7 @@ fn render_pivotal(
             y + 1,
             px as i64 - 1,
             px as i64 - 1,
-            [120, 40, 160],
+            PRIOR_SHADE,
             0.75 * t,
         );
     }
@@ -615,16 +617,138 @@ fn render_pivotal(
         let mut at = graph.nodes()[e.from.index()].0;
         for cell in &e.cells {
             if cell.0 != at {
-                c.line(centre(at), centre(cell.0), 2.0, [30, 30, 30], 0.4);
+                c.line(centre(at), centre(cell.0), 2.0, EDGE_GREY, 0.4);
                 at = cell.0;
             }
         }
     }
     for &p in pivotal {
         let (x, y) = centre(p);
-        c.fill_disc(x, y, px as f32 * 0.3, [255, 140, 0], 1.0);
+        c.fill_disc(x, y, px as f32 * 0.3, PIVOTAL_ORANGE, 1.0);
     }
     c
+}
+
+/// Colour of the prior-mean shade of [`render_pivotal`] (at 0.75 opacity
+/// for the highest mean).
+const PRIOR_SHADE: Rgb = [120, 40, 160];
+/// Colour of the pivotal states' discs.
+const PIVOTAL_ORANGE: Rgb = [255, 140, 0];
+/// Colour of the edges drawn along their paths.
+const EDGE_GREY: Rgb = [30, 30, 30];
+/// Colour of the passages' shade in the graph picture.
+const PASSAGE_GREEN: Rgb = [40, 170, 60];
+
+/// [`render_pivotal`] with its title and legend.
+fn pivotal_picture(
+    layout: &Layout,
+    prior: &[f32],
+    pivotal: &[u32],
+    graph: &planner::WorldGraph,
+    seed: u64,
+) -> Canvas {
+    let floor = object_color(Object::Floor);
+    let title = format!(
+        "Pivotal states V_p ({}) over the prior mean — {} maze, discovery seed {seed}",
+        pivotal.len(),
+        layout.name
+    );
+    let mut legend = vec![
+        LegendEntry::new(
+            Mark::Ramp {
+                low: floor,
+                high: blended(floor, PRIOR_SHADE, 0.75),
+            },
+            "shade: the prior's mean at the cell, low → high",
+        ),
+        LegendEntry::new(
+            Mark::Disc {
+                fill: PIVOTAL_ORANGE,
+                alpha: 1.0,
+                radius: 0.3,
+                outline: None,
+            },
+            "pivotal state (V_p)",
+        ),
+        LegendEntry::new(
+            Mark::Line {
+                colour: EDGE_GREY,
+                alpha: 0.4,
+                width: 2.0 / 24.0,
+                arrow: false,
+            },
+            format!(
+                "world graph edge along its path ({} edges)",
+                graph.edges().len()
+            ),
+        ),
+    ];
+    legend.extend(object_entries(&layout.cells, &[]));
+    captioned(
+        &render_pivotal(layout, prior, pivotal, graph),
+        &title,
+        &legend,
+    )
+}
+
+/// The world graph's picture ([`planner::WorldGraph::render`]: edges along
+/// their paths, coloured by length, an arrow head at the end node; the
+/// nodes), with the maze's passages shaded green under it when `passages`,
+/// and its title and legend. `discover` and the planner role write it as
+/// `graph.png`.
+pub fn graph_picture(graph: &planner::WorldGraph, passages: bool) -> Canvas {
+    let layout = graph.layout();
+    let title = format!(
+        "World graph — {} maze: {} nodes, {} edges",
+        layout.name,
+        graph.num_nodes(),
+        graph.edges().len()
+    );
+    let (short, long) = planner::WorldGraph::EDGE_COLOURS;
+    let mut legend = vec![
+        LegendEntry::new(
+            Mark::Disc {
+                fill: planner::WorldGraph::NODE_COLOUR,
+                alpha: 1.0,
+                radius: 0.24,
+                outline: Some([255, 255, 255]),
+            },
+            "world graph node",
+        ),
+        LegendEntry::new(
+            Mark::Line {
+                colour: short,
+                alpha: 0.8,
+                width: 0.08,
+                arrow: true,
+            },
+            "edge along its path, arrow head at its end node",
+        ),
+        LegendEntry::new(
+            Mark::Ramp {
+                low: short,
+                high: long,
+            },
+            "edge colour: short (dark blue) → long (light blue)",
+        ),
+    ];
+    if passages {
+        legend.push(LegendEntry::new(
+            Mark::Square {
+                fill: PASSAGE_GREEN,
+                alpha: 0.35,
+                inset: 1.0 / 24.0,
+            },
+            "passage between rooms (green shade)",
+        ));
+    }
+    legend.extend(object_entries(&layout.cells, &[]));
+    let picture = if passages {
+        render_graph(graph)
+    } else {
+        graph.render(24)
+    };
+    captioned(&picture, &title, &legend)
 }
 
 /// Random node sets drawn for the coverage's chance level.
@@ -708,7 +832,7 @@ fn render_graph(graph: &planner::WorldGraph) -> Canvas {
                 y as i64 + 1,
                 px as i64 - 1,
                 px as i64 - 1,
-                [40, 170, 60],
+                PASSAGE_GREEN,
                 0.35,
             );
         }

@@ -22,10 +22,11 @@ use learner::hrl::{
     WorldGraphInputs,
 };
 use serde::{Deserialize, Serialize};
-use sim::render::{Canvas, draw_grid, write_atomic};
-use sim::{BatchEnv, EnvConfig, Layout, Maze, Task};
+use sim::render::{Canvas, Rgb, draw_grid, object_color, write_atomic};
+use sim::{BatchEnv, EnvConfig, Layout, Maze, Object, Task};
 
-use crate::chart::{LineChart, Series, XScale};
+use crate::chart::{LEGEND_CELL, LegendEntry, LineChart, Mark, Series, XScale, captioned};
+use crate::update_log::{UpdateLog, UpdateRow};
 
 /// Environment stream of the validation seeds: validation seed `v` is the
 /// environment `(VALIDATION_STREAM, v)`.
@@ -102,6 +103,13 @@ pub struct TrainArgs {
     pub seed: u64,
     /// A TOML file of training settings (any subset of the resolved
     /// `config.toml` a run writes; unknown fields are refused).
+    /// `agent.horizon = 0` and `agent.window = 0` mean auto: the Manager
+    /// horizon a third of `rollout_len`; the narrow window 5×5 (7×7 on
+    /// grids wider than 25), widened to the smallest odd side whose windows
+    /// around the wide-goal candidates cover every free cell. The run's
+    /// `config.toml` holds the values they resolved to (0 where the agent
+    /// has no such setting: A2C's horizon, A2C's and FN's window); a run
+    /// resumes whether a setting is given as 0 or as that value.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Env-step budget [default: the --config file's, else 1,000,000],
@@ -130,8 +138,9 @@ pub struct TrainArgs {
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
     /// Print the resolved training settings (TOML, as the run's
-    /// `config.toml` would hold them) and exit without training or writing
-    /// anything.
+    /// `config.toml` would hold them: `0 = auto` settings replaced by their
+    /// values; WN's window over V_rand or V_p needs --world-graph) and exit
+    /// without training or writing anything.
     #[arg(long)]
     pub print_config: bool,
 }
@@ -536,6 +545,112 @@ fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
     })
 }
 
+/// `--world-graph` as a canonical path, checked to be a discovery run of
+/// this maze.
+fn world_graph_dir(a: &TrainArgs, layout: &Layout) -> anyhow::Result<Option<PathBuf>> {
+    let Some(p) = &a.world_graph else {
+        return Ok(None);
+    };
+    let wg =
+        std::fs::canonicalize(p).with_context(|| format!("no discovery run at {}", p.display()))?;
+    if super::run_dir::kind_of(&wg) == Some(super::run_dir::RunKind::Train) {
+        bail!(
+            "--world-graph {} is a train run; give the discover run whose world graph \
+             it used",
+            wg.display()
+        );
+    }
+    super::discover::check_world_graph_layout(&wg, a.maze, layout)?;
+    Ok(Some(wg))
+}
+
+/// What `0 = auto` stands for in `cfg` on this run: the Manager horizon
+/// `c` (FN and WN; A2C has no Manager) and the narrow window's side (WN,
+/// from `agent`'s wide-goal candidates, so `None` without an agent).
+fn auto_values(
+    cfg: &AgentConfig,
+    agent: Option<&HrlAgent>,
+    layout: &Layout,
+) -> (Option<usize>, Option<usize>) {
+    let horizon = (cfg.kind != AgentKind::A2c).then(|| {
+        AgentConfig {
+            horizon: 0,
+            ..cfg.clone()
+        }
+        .horizon() as usize
+    });
+    let window = agent
+        .filter(|_| cfg.kind == AgentKind::WideNarrow)
+        .and_then(|agent| {
+            if cfg.window == 0 {
+                // The side the agent resolved and uses.
+                agent.window_coverage().map(|c| c.side)
+            } else {
+                let base = AgentConfig {
+                    window: 0,
+                    ..cfg.clone()
+                }
+                .window_side(layout.width);
+                Some(learner::hrl::wide_narrow::covering_side(
+                    base,
+                    agent.candidates(),
+                    layout,
+                ))
+            }
+        });
+    (horizon, window)
+}
+
+/// `cfg` with each `0 = auto` replaced by the value it stands for (from
+/// [`auto_values`]); a setting the agent does not have (A2C's horizon and
+/// window, FN's window), or whose value is unknown, stays as given.
+fn resolve_auto(
+    cfg: &AgentConfig,
+    (horizon, window): (Option<usize>, Option<usize>),
+) -> AgentConfig {
+    let mut r = cfg.clone();
+    if r.horizon == 0
+        && let Some(h) = horizon
+    {
+        r.horizon = h;
+    }
+    if r.window == 0
+        && let Some(w) = window
+    {
+        r.window = w;
+    }
+    r
+}
+
+/// `--print-config`: the settings as the run's `config.toml` would hold
+/// them, `0 = auto` resolved. The window of WN over `V_rand` or `V_p`
+/// needs the world graph: without `--world-graph` it stays 0, said on
+/// stderr.
+fn print_config(a: &TrainArgs, mut cfg: TrainConfig, layout: &Layout) -> anyhow::Result<()> {
+    let world_graph = world_graph_dir(a, layout)?;
+    let agent = if cfg.agent.kind == AgentKind::WideNarrow {
+        match build_agent(&cfg.agent, layout, a.task, world_graph.as_deref(), a.seed) {
+            Ok(agent) => Some(agent),
+            Err(e) if world_graph.is_some() => return Err(e),
+            Err(_) => {
+                if cfg.agent.window == 0 {
+                    eprintln!(
+                        "train: window = {} stays as given: the auto side is resolved from the \
+                     world graph's wide-goal candidates; give --world-graph to print it",
+                        cfg.agent.window
+                    );
+                }
+                None
+            }
+        }
+    } else {
+        None
+    };
+    cfg.agent = resolve_auto(&cfg.agent, auto_values(&cfg.agent, agent.as_ref(), layout));
+    print!("{}", toml::to_string(&cfg)?);
+    Ok(())
+}
+
 /// Holds `<run>/lock` for the run's lifetime: a second `train` on the same
 /// directory is refused at once, naming the process that holds it.
 fn lock_run_dir(dir: &Path) -> anyhow::Result<std::fs::File> {
@@ -668,6 +783,28 @@ fn write_metrics(dir: &Path, state: &RunState) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Appends the command line, the crate's version and the commit the binary
+/// was built from to the run's `invocations.txt`.
+fn record_invocation(dir: &Path) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let args: Vec<String> = std::env::args_os()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    let line = format!(
+        "worldgraph {} (commit {}): {}\n",
+        env!("CARGO_PKG_VERSION"),
+        env!("WORLDGRAPH_BUILD_COMMIT"),
+        args.join(" ")
+    );
+    let path = dir.join("invocations.txt");
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .and_then(|mut f| f.write_all(line.as_bytes()))
+        .with_context(|| format!("cannot append to {}", path.display()))
+}
+
 fn csv_writer() -> String {
     String::from(
         "segment,iteration,env_steps,train_return,validation_score,worker_policy_loss,worker_value_loss,worker_entropy,manager_policy_loss,manager_value_loss,manager_entropy,goals_reached,traversal_share\n",
@@ -730,11 +867,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     }
     cfg.agent.validate()?;
     check_budget(&cfg, a.config.as_deref())?;
+    let layout = a.maze.layout(a.task.uses_door_key_layout());
     if a.print_config {
-        print!("{}", toml::to_string(&cfg)?);
+        print_config(&a, cfg, &layout)?;
         return Ok(std::process::ExitCode::SUCCESS);
     }
-    let layout = a.maze.layout(a.task.uses_door_key_layout());
     let env_cfg = EnvConfig::for_task(a.task, &layout);
     let dir = run_dir(&a, &layout, &cfg.agent);
     // Nothing is written before the directory, the world graph and the
@@ -746,23 +883,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             .and_then(|c| super::run_dir::name_in(&dir, c)),
     );
     super::run_dir::check("--run", &dir, super::run_dir::RunKind::Train, &own)?;
-    let world_graph = match &a.world_graph {
-        Some(p) => Some(
-            std::fs::canonicalize(p)
-                .with_context(|| format!("no discovery run at {}", p.display()))?,
-        ),
-        None => None,
-    };
-    if let Some(wg) = &world_graph {
-        if super::run_dir::kind_of(wg) == Some(super::run_dir::RunKind::Train) {
-            bail!(
-                "--world-graph {} is a train run; give the discover run whose world graph \
-                 it used",
-                wg.display()
-            );
-        }
-        super::discover::check_world_graph_layout(wg, a.maze, &layout)?;
-    }
+    let world_graph = world_graph_dir(&a, &layout)?;
+    let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
+    // The run's files and identity hold what `0 = auto` resolved to.
+    let auto = auto_values(&cfg.agent, Some(&agent), &layout);
+    cfg.agent = resolve_auto(&cfg.agent, auto);
     let identity = RunIdentity {
         maze: layout.name.clone(),
         task: a.task,
@@ -778,8 +903,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         if !state_path.exists() {
             return Ok(None);
         }
-        let old: RunState = serde_json::from_slice(&std::fs::read(&state_path)?)
+        let mut old: RunState = serde_json::from_slice(&std::fs::read(&state_path)?)
             .with_context(|| format!("{} is not a training state", state_path.display()))?;
+        // A run recorded before its identity held resolved values says
+        // 0 = auto: resolved for this maze and world graph, as this one.
+        old.identity.config.agent = resolve_auto(&old.identity.config.agent, auto);
         if old.identity != identity {
             bail!(
                 "{} holds another run ({}); use another --run",
@@ -809,7 +937,6 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             cfg.env_steps, cfg.eval_every, cfg.agent.envs, cfg.agent.rollout_len
         );
     }
-    let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
 
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let _lock = lock_run_dir(&dir)?;
@@ -822,6 +949,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             "test": {"stream": TEST_STREAM, "seeds": format!("0..{}", cfg.test_seeds)},
         }))?,
     )?;
+
+    // What made the run: the command line, the crate's version and the
+    // commit the binary was built from (`build.rs`), one line per start
+    // (a resumed run appends its own).
+    record_invocation(&dir)?;
 
     let window_coverage = agent.window_coverage();
     if let Some(c) = &window_coverage {
@@ -894,14 +1026,50 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
             agent.start_segment(env.as_mut(), state.segments_done)?;
         }
     }
+    // One row per update (`updates.csv`, TensorBoard), kept up to the
+    // checkpoint the run resumes from.
+    let mut updates = if state.segments_done < segments {
+        Some(UpdateLog::open(
+            &dir,
+            state.env_steps,
+            cfg.agent.kind != AgentKind::A2c,
+        )?)
+    } else {
+        None
+    };
     while state.segments_done < segments {
         let seg_start = Instant::now();
         let train_env = env
             .as_mut()
             .expect("invariant: made above while segments remain");
         let mut stats = Vec::with_capacity(iters_per_segment as usize);
-        for _ in 0..iters_per_segment {
+        for k in 0..iters_per_segment {
+            let t0 = Instant::now();
             let s = agent.train_iteration(train_env.as_mut())?;
+            if let Some(log) = updates.as_mut() {
+                let update = state.segments_done * iters_per_segment + k + 1;
+                log.push(&UpdateRow {
+                    update,
+                    env_steps: update * steps_per_iter,
+                    wall_seconds: wall_before + seg_start.elapsed().as_secs_f64(),
+                    episodes: s.episodes,
+                    episodic_return: if s.episodes > 0 {
+                        s.mean_return
+                    } else {
+                        f64::NAN
+                    },
+                    policy_loss: s.worker.policy_loss,
+                    value_loss: s.worker.value_loss,
+                    entropy: s.worker.entropy,
+                    manager_policy_loss: s.manager.policy_loss,
+                    manager_value_loss: s.manager.value_loss,
+                    manager_entropy: s.manager.entropy,
+                    intervals: s.intervals,
+                    goals_reached: s.goals_reached,
+                    traversal_share: s.traversal_share,
+                    sps: s.env_steps as f64 / t0.elapsed().as_secs_f64().max(1e-9),
+                })?;
+            }
             bar.inc(1);
             bar.set_message(format!(
                 "return {:.2}  validation {}",
@@ -999,7 +1167,9 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     curves(&state.rows, &summary)
         .render(900, 520)
         .save_png(&dir.join("curves.png"))?;
-    episode_picture(&layout, &trace, agent.graph()).save_png(&dir.join("episode.png"))?;
+    // The trace is environment 0's episode: test seed 0.
+    episode_picture(&layout, &trace, agent.graph(), &cfg.agent, a.task, 0)
+        .save_png(&dir.join("episode.png"))?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {
@@ -1064,60 +1234,222 @@ fn curves(rows: &[MetricsRow], s: &TestSummary) -> LineChart {
     }
 }
 
-/// The maze with one test episode: the agent's path (red where the Worker
+/// What a traced episode did with the task's objects: the balls it started
+/// with and collected, whether it ended on the exit, the key and the door
+/// (from the grids it started and ended on).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EpisodeOutcome {
+    /// Balls on the grid at the start.
+    pub balls: usize,
+    /// Of those, the ones missing from the final grid.
+    pub collected: usize,
+    /// The episode ended on an exit cell.
+    pub exited: bool,
+    /// A key on the start grid was gone from its cell at the end.
+    pub key_taken: bool,
+    /// A door closed or locked at the start was open at the end.
+    pub door_opened: bool,
+}
+
+impl EpisodeOutcome {
+    /// The outcome of `t`; `None` when it holds no start and end grids.
+    pub fn of(t: &EpisodeTrace) -> Option<EpisodeOutcome> {
+        let (a, b) = (&t.start_cells, &t.end_cells);
+        if a.is_empty() || a.len() != b.len() {
+            return None;
+        }
+        let code = |o: Object| o as u8;
+        let gone = |o: Object| {
+            a.iter()
+                .zip(b)
+                .filter(|&(&x, &y)| x == code(o) && y != code(o))
+                .count()
+        };
+        let last = t.cells.last().map(|&c| c as usize);
+        Some(EpisodeOutcome {
+            balls: a.iter().filter(|&&c| c == code(Object::Ball)).count(),
+            collected: gone(Object::Ball),
+            exited: last.and_then(|c| b.get(c)) == Some(&code(Object::Exit)),
+            key_taken: gone(Object::Key) > 0,
+            door_opened: a.iter().zip(b).any(|(&x, &y)| {
+                (x == code(Object::DoorLocked) || x == code(Object::DoorClosed))
+                    && y == code(Object::DoorOpen)
+            }),
+        })
+    }
+}
+
+/// The paper's name of an agent configuration: `A2C`, `FN + π_g init`,
+/// `WN V_p + traversal + π_g init`, ...
+pub fn agent_label(cfg: &AgentConfig) -> String {
+    let mut s = match cfg.kind {
+        AgentKind::A2c => "A2C".to_string(),
+        AgentKind::Feudal => "FN".to_string(),
+        AgentKind::WideNarrow => format!("WN {}", candidates_label(cfg.candidates)),
+    };
+    if cfg.traversal {
+        s.push_str(" + traversal");
+    }
+    if cfg.init_from_gcp {
+        s.push_str(" + π_g init");
+    }
+    s
+}
+
+fn candidates_label(c: Candidates) -> &'static str {
+    match c {
+        Candidates::All => "V_all",
+        Candidates::Random => "V_rand",
+        Candidates::Pivotal => "V_p",
+    }
+}
+
+/// The paper's name of a task.
+pub fn task_label(task: Task) -> &'static str {
+    match task {
+        Task::MultiGoal => "MultiGoal",
+        Task::MultiGoalSparse => "MultiGoal-Sparse",
+        Task::MultiGoalStochastic => "MultiGoal-Stochastic",
+        Task::DoorKey => "Door-Key",
+    }
+}
+
+/// Colours of the episode picture's marks.
+const WORKER_RED: Rgb = [220, 30, 40];
+const TRAVERSAL_BLUE: Rgb = [100, 180, 255];
+const NARROW_BLUE: Rgb = [120, 190, 255];
+const WIDE_BLUE: Rgb = [20, 60, 220];
+const NODE_BLUE: Rgb = [90, 90, 200];
+/// The frame around the exit cells.
+pub const EXIT_FRAME: Rgb = [255, 190, 0];
+const TICK_GREEN: Rgb = [20, 140, 50];
+/// Pixels per cell of the episode picture.
+pub const EPISODE_PX: usize = 28;
+
+/// The narrow goal's mark on the cell at `(x, y)`.
+fn narrow_goal_mark(c: &mut Canvas, x: i64, y: i64, px: usize) {
+    let (p, d) = (px as i64, (px * 3 / 28) as i64);
+    c.fill_rect(x + d, y + d, p - 2 * d, p - 2 * d, NARROW_BLUE, 0.55);
+}
+
+/// The wide goal's mark on the cell at `(x, y)`.
+fn wide_goal_mark(c: &mut Canvas, x: i64, y: i64, px: usize) {
+    let (p, d) = (px as i64, (px * 5 / 28) as i64);
+    c.fill_rect(x + d, y + d, p - 2 * d, p - 2 * d, WIDE_BLUE, 0.8);
+}
+
+/// A ball on the cell at `(x, y)`: as the grid draws one while it lies
+/// there; a ring with a tick once collected.
+fn ball_mark(c: &mut Canvas, x: i64, y: i64, px: usize, collected: bool) {
+    let s = px as f32;
+    let (cx, cy) = (x as f32 + s / 2.0, y as f32 + s / 2.0);
+    let ball = object_color(Object::Ball);
+    if !collected {
+        c.fill_disc(cx, cy, s * 0.32, ball, 1.0);
+        return;
+    }
+    let (r_out, r_in) = (s * 0.32, s * 0.21);
+    for yy in y..y + px as i64 {
+        for xx in x..x + px as i64 {
+            let (dx, dy) = (xx as f32 + 0.5 - cx, yy as f32 + 0.5 - cy);
+            let d2 = dx * dx + dy * dy;
+            if d2 <= r_out * r_out && d2 > r_in * r_in {
+                c.blend(xx, yy, ball, 1.0);
+            }
+        }
+    }
+    tick_mark(c, x, y, px);
+}
+
+/// A green tick over the cell at `(x, y)`: what the episode took.
+fn tick_mark(c: &mut Canvas, x: i64, y: i64, px: usize) {
+    let s = px as f32;
+    let at = |u: f32, v: f32| (x as f32 + u * s, y as f32 + v * s);
+    c.line(at(0.3, 0.52), at(0.45, 0.68), s * 0.1, TICK_GREEN, 1.0);
+    c.line(at(0.45, 0.68), at(0.72, 0.36), s * 0.1, TICK_GREEN, 1.0);
+}
+
+/// The frame that marks an exit cell at `(x, y)`.
+fn exit_frame(c: &mut Canvas, x: i64, y: i64, px: usize) {
+    let (p, t) = (px as i64, (px / 9).max(2) as i64);
+    c.fill_rect(x, y, p, t, EXIT_FRAME, 1.0);
+    c.fill_rect(x, y + p - t, p, t, EXIT_FRAME, 1.0);
+    c.fill_rect(x, y, t, p, EXIT_FRAME, 1.0);
+    c.fill_rect(x + p - t, y, t, p, EXIT_FRAME, 1.0);
+}
+
+/// A legend sample: one floor cell with `draw` applied, as the picture
+/// applies it.
+fn legend_sample(base: Object, draw: impl Fn(&mut Canvas, i64, i64, usize)) -> Mark {
+    let mut c = crate::chart::cell_sample(base as u8);
+    draw(&mut c, 0, 0, LEGEND_CELL);
+    Mark::Sample(c)
+}
+
+/// The maze with one test episode, `px` pixels a cell, without caption:
+/// the grid the episode started on, the agent's path (red where the Worker
 /// acted, light blue where the world graph was traversed), the wide goals
-/// (solid blue squares) and narrow goals (light blue squares), and the
-/// graph's nodes (the paper's Figure 1, bottom).
-pub fn episode_picture(
+/// (dark blue squares) and narrow goals (light blue squares), the graph's
+/// nodes (the paper's Figure 1, bottom), the balls (a ring with a tick
+/// where collected), the key taken (ticked) and the exits (framed).
+pub fn episode_maze(
     layout: &Layout,
     t: &EpisodeTrace,
     graph: Option<&planner::WorldGraph>,
+    px: usize,
 ) -> Canvas {
-    let px = 28usize;
+    let start: &[u8] = if t.start_cells.len() == layout.cells.len() {
+        &t.start_cells
+    } else {
+        &layout.cells
+    };
+    let end: Option<&[u8]> = (t.end_cells.len() == start.len()).then_some(&t.end_cells);
+    // The grid as it started, less its balls (drawn on top), its doors as
+    // they ended.
+    let ground: Vec<u8> = start
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| {
+            let door = [Object::DoorOpen, Object::DoorClosed, Object::DoorLocked]
+                .iter()
+                .any(|&d| c == d as u8);
+            match end {
+                _ if c == Object::Ball as u8 => Object::Floor as u8,
+                Some(e) if door => e[i],
+                _ => c,
+            }
+        })
+        .collect();
     let mut c = Canvas::new(layout.width * px, layout.height * px, [255, 255, 255]);
-    draw_grid(&mut c, &layout.cells, layout.width, 0, 0, px);
+    draw_grid(&mut c, &ground, layout.width, 0, 0, px);
     let centre = |cell: u32| {
         let (x, y) = (cell as usize % layout.width, cell as usize / layout.width);
         ((x as f32 + 0.5) * px as f32, (y as f32 + 0.5) * px as f32)
     };
-    let corner = |cell: u32| {
+    let corner = |cell: usize| {
         (
-            (cell as usize % layout.width * px) as i64,
-            (cell as usize / layout.width * px) as i64,
+            (cell % layout.width * px) as i64,
+            (cell / layout.width * px) as i64,
         )
     };
     if let Some(g) = graph {
         for n in g.nodes() {
             let (x, y) = centre(n.0);
-            c.fill_disc(x, y, px as f32 * 0.18, [90, 90, 200], 0.5);
+            c.fill_disc(x, y, px as f32 * 0.18, NODE_BLUE, 0.5);
         }
     }
     for &(_, gw, gn) in &t.goals {
-        let (x, y) = corner(gn);
-        c.fill_rect(
-            x + 3,
-            y + 3,
-            px as i64 - 6,
-            px as i64 - 6,
-            [120, 190, 255],
-            0.55,
-        );
-        let (x, y) = corner(gw);
-        c.fill_rect(
-            x + 5,
-            y + 5,
-            px as i64 - 10,
-            px as i64 - 10,
-            [20, 60, 220],
-            0.8,
-        );
+        let (x, y) = corner(gn as usize);
+        narrow_goal_mark(&mut c, x, y, px);
+        let (x, y) = corner(gw as usize);
+        wide_goal_mark(&mut c, x, y, px);
     }
     for (k, w) in t.cells.windows(2).enumerate() {
         let traversed = t.traversed.get(k).copied().unwrap_or(false);
         let colour = if traversed {
-            [100, 180, 255]
+            TRAVERSAL_BLUE
         } else {
-            [220, 30, 40]
+            WORKER_RED
         };
         c.line(
             centre(w[0]),
@@ -1127,11 +1459,180 @@ pub fn episode_picture(
             0.8,
         );
     }
+    for (i, &code) in start.iter().enumerate() {
+        let (x, y) = corner(i);
+        let taken = end.is_some_and(|e| e[i] != code);
+        if code == Object::Ball as u8 {
+            ball_mark(&mut c, x, y, px, taken);
+        } else if code == Object::Key as u8 && taken {
+            tick_mark(&mut c, x, y, px);
+        } else if code == Object::Exit as u8 {
+            exit_frame(&mut c, x, y, px);
+        }
+    }
     if let Some(&first) = t.cells.first() {
         let (x, y) = centre(first);
-        c.fill_disc(x, y, px as f32 * 0.3, [220, 30, 40], 1.0);
+        c.fill_disc(x, y, px as f32 * 0.3, WORKER_RED, 1.0);
     }
     c
+}
+
+/// The picture of one test episode ([`episode_maze`]) with its title (the
+/// agent, maze, task, test seed and what the episode did) and a legend of
+/// every mark drawn.
+pub fn episode_picture(
+    layout: &Layout,
+    t: &EpisodeTrace,
+    graph: Option<&planner::WorldGraph>,
+    agent: &AgentConfig,
+    task: Task,
+    test_seed: u64,
+) -> Canvas {
+    let maze = episode_maze(layout, t, graph, EPISODE_PX);
+    let outcome = EpisodeOutcome::of(t);
+    let mut title = format!(
+        "{} — {} maze, {}, test seed {test_seed}: return {:.2}",
+        agent_label(agent),
+        layout.name,
+        task_label(task),
+        t.episode_return
+    );
+    if let Some(o) = outcome {
+        if o.balls > 0 {
+            title.push_str(&format!(", {} of {} balls", o.collected, o.balls));
+        }
+        if o.key_taken {
+            title.push_str(", key taken");
+        }
+        if o.door_opened {
+            title.push_str(", door opened");
+        }
+        title.push_str(if o.exited {
+            ", exited"
+        } else {
+            ", did not exit"
+        });
+    }
+    let start: &[u8] = if t.start_cells.len() == layout.cells.len() {
+        &t.start_cells
+    } else {
+        &layout.cells
+    };
+    let has = |o: Object| start.contains(&(o as u8));
+    let mut legend = vec![
+        LegendEntry::new(
+            Mark::Disc {
+                fill: WORKER_RED,
+                alpha: 1.0,
+                radius: 0.3,
+                outline: None,
+            },
+            "where the episode started",
+        ),
+        LegendEntry::new(
+            Mark::Line {
+                colour: WORKER_RED,
+                alpha: 0.8,
+                width: 3.0 / EPISODE_PX as f32,
+                arrow: false,
+            },
+            if agent.kind == AgentKind::A2c {
+                "a step of the agent"
+            } else {
+                "a step the Worker took"
+            },
+        ),
+    ];
+    if agent.traversal || t.traversed.iter().any(|&b| b) {
+        legend.push(LegendEntry::new(
+            Mark::Line {
+                colour: TRAVERSAL_BLUE,
+                alpha: 0.8,
+                width: 5.0 / EPISODE_PX as f32,
+                arrow: false,
+            },
+            "a step of world graph traversal",
+        ));
+    }
+    if let Some(g) = graph {
+        legend.push(LegendEntry::new(
+            Mark::Disc {
+                fill: NODE_BLUE,
+                alpha: 0.5,
+                radius: 0.18,
+                outline: None,
+            },
+            format!(
+                "world graph node ({}, {} nodes)",
+                candidates_label(agent.candidates),
+                g.num_nodes()
+            ),
+        ));
+    }
+    match agent.kind {
+        AgentKind::WideNarrow => {
+            legend.push(LegendEntry::new(
+                legend_sample(Object::Floor, wide_goal_mark),
+                "wide goal g_w the Manager chose",
+            ));
+            legend.push(LegendEntry::new(
+                legend_sample(Object::Floor, narrow_goal_mark),
+                "narrow goal g_n in its window",
+            ));
+        }
+        AgentKind::Feudal => legend.push(LegendEntry::new(
+            legend_sample(Object::Floor, |c, x, y, px| {
+                narrow_goal_mark(c, x, y, px);
+                wide_goal_mark(c, x, y, px);
+            }),
+            "subgoal the Manager chose",
+        )),
+        AgentKind::A2c => {}
+    }
+    if has(Object::Ball) {
+        legend.push(LegendEntry::new(
+            legend_sample(Object::Floor, |c, x, y, px| ball_mark(c, x, y, px, false)),
+            "ball, not collected",
+        ));
+        legend.push(LegendEntry::new(
+            legend_sample(Object::Floor, |c, x, y, px| ball_mark(c, x, y, px, true)),
+            "ball collected in this episode (ring, ticked)",
+        ));
+    }
+    if outcome.is_some_and(|o| o.key_taken) {
+        legend.push(LegendEntry::new(
+            legend_sample(Object::Key, tick_mark),
+            "key, taken in this episode (ticked)",
+        ));
+    }
+    if has(Object::Exit) {
+        legend.push(LegendEntry::new(
+            legend_sample(Object::Exit, exit_frame),
+            match outcome.map(|o| o.exited) {
+                Some(true) => "exit (framed): the episode ended here",
+                Some(false) => "exit (framed): not reached",
+                None => "exit (framed)",
+            },
+        ));
+    }
+    let mut skip = vec![Object::Ball, Object::Exit];
+    if let Some(e) = Some(&t.end_cells).filter(|e| e.len() == start.len()) {
+        // Doors are drawn as they ended.
+        legend.extend(crate::chart::object_entries(
+            e,
+            &[
+                Object::Floor,
+                Object::Wall,
+                Object::Ball,
+                Object::Exit,
+                Object::Key,
+                Object::Lava,
+            ],
+        ));
+        skip.extend([Object::DoorOpen, Object::DoorClosed, Object::DoorLocked]);
+    }
+    legend.extend(crate::chart::object_entries(start, &skip));
+    captioned(&maze, &title, &legend)
 }
 
 fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
@@ -1170,7 +1671,9 @@ fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
     for (k, v) in rows {
         println!("  {k:<50} {v:>12}");
     }
-    println!("  files: config.toml metrics.csv curves.png test.json episode.png");
+    println!(
+        "  files: config.toml metrics.csv updates.csv tensorboard/ invocations.txt curves.png test.json episode.png"
+    );
 }
 
 /// `evaluate` options.
@@ -1282,7 +1785,15 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     }
     let score = scores.iter().sum::<f64>() / scores.len() as f64;
     if let Some(p) = &a.picture {
-        episode_picture(&layout, &trace, agent.graph()).save_png(p)?;
+        episode_picture(
+            &layout,
+            &trace,
+            agent.graph(),
+            &id.config.agent,
+            id.task,
+            first,
+        )
+        .save_png(p)?;
     }
     if a.json {
         println!(
@@ -1321,6 +1832,219 @@ mod tests {
             };
             assert_eq!(trained_env_steps(&cfg), trained, "{budget}");
         }
+    }
+
+    fn pixel(c: &Canvas, x: usize, y: usize) -> Rgb {
+        let i = (y * c.width + x) * 3;
+        [c.rgb[i], c.rgb[i + 1], c.rgb[i + 2]]
+    }
+
+    /// The row at which `picture` sits at column `x` of `c`, if anywhere.
+    fn find_picture(c: &Canvas, picture: &Canvas, x: usize) -> Option<usize> {
+        let row = |cv: &Canvas, y: usize, x0: usize| {
+            cv.rgb[(y * cv.width + x0) * 3..(y * cv.width + x0 + picture.width) * 3].to_vec()
+        };
+        (0..=c.height.saturating_sub(picture.height))
+            .find(|&y| (0..picture.height).all(|r| row(c, y + r, x) == row(picture, r, 0)))
+    }
+
+    /// A hand-made episode on the small maze: balls on two floor cells
+    /// `a` and `b` far from the start, the agent walking from the start to
+    /// `a`; with `collected`, the end grid lacks `a`'s ball.
+    fn ball_episode(collected: bool) -> (Layout, EpisodeTrace, usize, usize, usize) {
+        let layout = Maze::Small.layout(false);
+        let start = layout.cell_index(layout.start.x as usize, layout.start.y as usize);
+        let free = layout.free_cells();
+        let floor: Vec<usize> = free
+            .iter()
+            .map(|&c| c as usize)
+            .filter(|&c| layout.cells[c] == Object::Floor as u8 && c != start)
+            .collect();
+        let (a, b) = (floor[floor.len() / 2], floor[floor.len() - 1]);
+        let exit = (0..layout.cells.len())
+            .find(|&i| layout.cells[i] == Object::Exit as u8)
+            .expect("the small maze has an exit");
+        let mut start_cells = layout.cells.clone();
+        start_cells[a] = Object::Ball as u8;
+        start_cells[b] = Object::Ball as u8;
+        let mut end_cells = start_cells.clone();
+        if collected {
+            end_cells[a] = Object::Floor as u8;
+        }
+        let t = EpisodeTrace {
+            cells: vec![start as u32, a as u32],
+            traversed: vec![false],
+            goals: Vec::new(),
+            episode_return: 0.99,
+            start_cells,
+            end_cells,
+        };
+        (layout, t, a, b, exit)
+    }
+
+    /// Issue 21: the episode picture draws the balls the episode started
+    /// with, a collected one as a ring (its centre no longer the ball's
+    /// colour) and an uncollected one as the grid draws a ball, and frames
+    /// the exit.
+    #[test]
+    fn the_episode_picture_tells_collected_balls_from_the_others_and_frames_the_exit() {
+        let px = EPISODE_PX;
+        let ball = object_color(Object::Ball);
+        let centre = |layout: &Layout, cell: usize| {
+            (
+                cell % layout.width * px + px / 2,
+                cell / layout.width * px + px / 2,
+            )
+        };
+        let (layout, t, a, b, exit) = ball_episode(true);
+        let c = episode_maze(&layout, &t, None, px);
+        let (ax, ay) = centre(&layout, a);
+        let (bx, by) = centre(&layout, b);
+        assert_eq!(
+            pixel(&c, bx, by),
+            ball,
+            "the uncollected ball is drawn whole"
+        );
+        assert_ne!(pixel(&c, ax, ay), ball, "the collected ball is hollow");
+        let ring = (px as f32 * 0.27) as usize;
+        assert_eq!(pixel(&c, ax, ay - ring), ball, "the collected ball's ring");
+        // The same episode without the collection: a's ball is whole.
+        let (_, t_kept, ..) = ball_episode(false);
+        let kept = episode_maze(&layout, &t_kept, None, px);
+        assert_eq!(
+            pixel(&kept, ax, ay),
+            ball,
+            "an uncollected ball under the path"
+        );
+        // The exit is framed; a floor cell is not.
+        let (ex, ey) = (exit % layout.width * px, exit / layout.width * px);
+        assert_eq!(pixel(&c, ex + 1, ey + px / 2), EXIT_FRAME);
+        assert_ne!(pixel(&c, bx - px / 2 + 1, by), EXIT_FRAME);
+        assert_eq!(
+            EpisodeOutcome::of(&t),
+            Some(EpisodeOutcome {
+                balls: 2,
+                collected: 1,
+                exited: false,
+                ..EpisodeOutcome::default()
+            })
+        );
+        let mut exited = t.clone();
+        exited.cells.push(exit as u32);
+        assert!(EpisodeOutcome::of(&exited).is_some_and(|o| o.exited));
+    }
+
+    /// Issue 21: the saved picture is the maze with a title above it and a
+    /// legend below that shows the collected-ball mark.
+    #[test]
+    fn the_episode_picture_has_a_title_and_a_legend_of_its_marks() {
+        let (layout, t, ..) = ball_episode(true);
+        let agent = AgentConfig {
+            kind: AgentKind::WideNarrow,
+            traversal: true,
+            init_from_gcp: true,
+            ..AgentConfig::default()
+        };
+        let maze = episode_maze(&layout, &t, None, EPISODE_PX);
+        let c = episode_picture(&layout, &t, None, &agent, Task::MultiGoal, 7);
+        let x = (c.width - maze.width) / 2;
+        let y = find_picture(&c, &maze, x).expect("the maze, whole");
+        assert!(
+            y > 20 && c.height > y + maze.height + 100,
+            "{y} {}",
+            c.height
+        );
+        let dark_title = (0..y * c.width)
+            .filter(|&i| c.rgb[3 * i..3 * i + 3].iter().all(|&v| v < 100))
+            .count();
+        assert!(dark_title > 50, "the title is written: {dark_title} px");
+        let legend = &c.rgb[(y + maze.height) * c.width * 3..];
+        let ticks = legend.chunks(3).filter(|p| *p == TICK_GREEN).count();
+        assert!(ticks > 5, "the legend shows the collected ball's tick");
+        let frame = legend.chunks(3).filter(|p| *p == EXIT_FRAME).count();
+        assert!(frame > 20, "the legend shows the exit's frame");
+        assert_eq!(
+            agent_label(&agent),
+            "WN V_p + traversal + π_g init",
+            "the configuration's name in the title"
+        );
+    }
+
+    /// Issue 21: a real test episode records the grid it started on and
+    /// the grid it ended on, and they agree with the simulator's return
+    /// (MultiGoal: +1 a ball, +1 at the exit, −0.01 a step).
+    #[test]
+    fn a_traced_episode_records_its_start_and_end_grids() {
+        let layout = Maze::Small.layout(false);
+        let cfg = AgentConfig {
+            kind: AgentKind::A2c,
+            envs: 1,
+            ..AgentConfig::default()
+        };
+        let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 3).unwrap();
+        let env_cfg = EnvConfig::for_task(Task::MultiGoal, &layout);
+        let mut env = eval_env(&layout, env_cfg, TEST_STREAM, 0, 2).unwrap();
+        let mut t = EpisodeTrace::default();
+        let r = agent.evaluate(&mut env, 1, Some(&mut t)).unwrap();
+        assert_eq!(t.start_cells.len(), layout.cells.len());
+        assert_eq!(t.end_cells.len(), layout.cells.len());
+        let o = EpisodeOutcome::of(&t).unwrap();
+        assert_eq!(o.balls, sim::task::DEFAULT_BALLS as usize, "{o:?}");
+        let steps = t.cells.len() - 1;
+        assert_eq!(steps as u32, r.lengths[0]);
+        let expected = o.collected as f32 + f32::from(u8::from(o.exited)) + steps as f32 * -0.01;
+        assert!(
+            (t.episode_return - expected).abs() < 1e-3,
+            "return {} but the grids say {o:?} over {steps} steps",
+            t.episode_return
+        );
+        // The walls and the exit are where the layout has them.
+        for (i, (&s, &l)) in t.start_cells.iter().zip(&layout.cells).enumerate() {
+            if l == Object::Wall as u8 || l == Object::Exit as u8 {
+                assert_eq!(s, l, "cell {i}");
+            }
+        }
+    }
+
+    /// Issue 21: `0 = auto` resolves to the values the agent uses; a
+    /// setting the agent lacks stays 0, and an explicit value stays.
+    #[test]
+    fn auto_settings_resolve_to_what_the_agent_uses() {
+        let layout = Maze::Small.layout(false);
+        let wn = AgentConfig {
+            kind: AgentKind::WideNarrow,
+            candidates: Candidates::All,
+            envs: 1,
+            rollout_len: 21,
+            ..AgentConfig::default()
+        };
+        let agent = HrlAgent::new(&wn, &layout, Task::MultiGoal, None, 0).unwrap();
+        let auto = auto_values(&wn, Some(&agent), &layout);
+        let side = agent.window_coverage().unwrap().side;
+        assert_eq!(auto, (Some(7), Some(side)));
+        let r = resolve_auto(&wn, auto);
+        assert_eq!((r.horizon, r.window), (7, side));
+        assert!(side >= 5 && side % 2 == 1, "{side}");
+        // The resolved settings build the same agent.
+        let again = HrlAgent::new(&r, &layout, Task::MultiGoal, None, 0).unwrap();
+        assert_eq!(again.window_coverage().unwrap().side, side);
+        let explicit = AgentConfig {
+            horizon: 4,
+            ..wn.clone()
+        };
+        assert_eq!(resolve_auto(&explicit, auto).horizon, 4);
+        let a2c = AgentConfig {
+            kind: AgentKind::A2c,
+            ..wn.clone()
+        };
+        let r = resolve_auto(&a2c, auto_values(&a2c, None, &layout));
+        assert_eq!((r.horizon, r.window), (0, 0), "A2C has neither");
+        let fnet = AgentConfig {
+            kind: AgentKind::Feudal,
+            ..wn
+        };
+        let r = resolve_auto(&fnet, auto_values(&fnet, None, &layout));
+        assert_eq!((r.horizon, r.window), (7, 0), "FN has a horizon, no window");
     }
 
     /// Issue 21, item 8: the config's agent kind may be spelled as the

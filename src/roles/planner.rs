@@ -162,7 +162,7 @@ pub fn load_or_build(
         t0.elapsed()
     );
     graph.save(&path)?;
-    graph.save_png(&dir.join("graph.png"), 24)?;
+    crate::commands::discover::graph_picture(&graph, false).save_png(&dir.join("graph.png"))?;
     Ok((graph, false))
 }
 

@@ -288,7 +288,9 @@ pub fn final_values(
         input.push_final_env(obs, e, goals);
     }
     let idx = Tensor::from_slice(&envs.iter().map(|&e| e as i64).collect::<Vec<_>>());
-    floats(&tch::no_grad(|| net.step(&input, &state.select(&idx)).value))
+    floats(&tch::no_grad(|| {
+        net.step(&input, &state.select(&idx)).value
+    }))
 }
 
 /// Adds `γ·V(s_final)` to the rewards of the environments `envs` whose
@@ -304,10 +306,7 @@ pub fn bootstrap_truncated(
     envs: &[usize],
     gamma: f64,
 ) {
-    for (&e, v) in envs
-        .iter()
-        .zip(final_values(net, obs, goals, state, envs))
-    {
+    for (&e, v) in envs.iter().zip(final_values(net, obs, goals, state, envs)) {
         rewards[e] += gamma as f32 * v;
     }
 }

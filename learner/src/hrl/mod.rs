@@ -359,6 +359,15 @@ pub struct EpisodeTrace {
     pub goals: Vec<(u32, u32, u32)>,
     /// The episode's return.
     pub episode_return: f32,
+    /// The grid the episode started on (row-major object codes, as
+    /// `sim::Object`): its balls, key, doors, exit.
+    #[serde(default)]
+    pub start_cells: Vec<u8>,
+    /// The grid the episode ended on (the step record's final cells of the
+    /// step that ended it): a ball of `start_cells` missing here was
+    /// collected. Empty when the transport carries no final cells.
+    #[serde(default)]
+    pub end_cells: Vec<u8>,
 }
 
 /// A stage 2 agent (module docs).
@@ -1112,6 +1121,14 @@ impl HrlAgent {
                 t.cells.push(cell);
                 t.traversed.push(traversing[e]);
                 *step += 1;
+                if ended {
+                    let cpe = obs.width * obs.height;
+                    t.end_cells = obs
+                        .final_cells
+                        .get(e * cpe..(e + 1) * cpe)
+                        .map(<[u8]>::to_vec)
+                        .unwrap_or_default();
+                }
             }
             if !self.hierarchical() {
                 (rewards[e], dones[e]) = a2c::task_step(m);
@@ -1355,7 +1372,9 @@ impl HrlAgent {
         let mut counts = StepCounts::default();
         let mut trace = trace.map(|t| {
             *t = EpisodeTrace::default();
-            t.cells.push(env.observe().meta[0].cell(self.width) as u32);
+            let obs = env.observe();
+            t.cells.push(obs.meta[0].cell(self.width) as u32);
+            t.start_cells = obs.env_cells(0).to_vec();
             (0usize, 0u32, t)
         });
         while done.iter().any(|d| !d) {
