@@ -597,9 +597,12 @@ impl WorldGraph {
     /// the agent cannot stand on are dropped (as when a discover run's
     /// pivotal states are moved to the Door-Key variant of their maze).
     /// `task` decides the walks' rules (Door-Key: balls block, the key and
-    /// doors work).
+    /// doors work). `exhaustive=True` finds every edge random walks could
+    /// ever find, by a search over states, instead of the walks: the edges
+    /// that need the key fetched and the door opened on the way, which
+    /// walks stopping at the first node they meet rarely find.
     #[staticmethod]
-    #[pyo3(signature = (nodes, task="multigoal", maze=None, layout=None, seed=0))]
+    #[pyo3(signature = (nodes, task="multigoal", maze=None, layout=None, seed=0, exhaustive=false))]
     fn build(
         py: Python<'_>,
         nodes: Vec<(u16, u16)>,
@@ -607,6 +610,7 @@ impl WorldGraph {
         maze: Option<&str>,
         layout: Option<&str>,
         seed: u64,
+        exhaustive: bool,
     ) -> PyResult<WorldGraph> {
         let task = parse_task(task)?;
         let layout = layout_of(task, maze, layout)?;
@@ -629,6 +633,11 @@ impl WorldGraph {
             seed,
             task: if task == Task::DoorKey { Task::DoorKey } else { Task::MultiGoal },
             shorten: true,
+            edge_search: if exhaustive {
+                planner::EdgeSearch::Exhaustive
+            } else {
+                planner::EdgeSearch::RandomWalks
+            },
             ..PlannerConfig::default()
         };
         let graph = py

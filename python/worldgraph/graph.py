@@ -38,7 +38,7 @@ def pivotal_states(run_dir: str | os.PathLike[str]) -> list[tuple[int, int]]:
 
 
 def load_discover_run(
-    run_dir: str | os.PathLike[str], task: str | None = None, seed: int = 0
+    run_dir: str | os.PathLike[str], task: str | None = None, seed: int = 0, exhaustive: bool = True
 ) -> _native.WorldGraph:
     """The world graph of a ``worldgraph discover`` run directory.
 
@@ -47,7 +47,11 @@ def load_discover_run(
     Door-Key variant of its maze (cells the agent cannot stand on there are
     dropped) and the graph built again under Door-Key rules, as stage 2
     does; its edges are shortened by an exact search instead of by ``π_g``
-    (which needs libtorch).
+    (which needs libtorch). With ``exhaustive`` (the default) the Door-Key
+    edges come from a search over states rather than random walks: a walk
+    stops at the first node it meets, so walks seldom find the edges that
+    fetch the key and open the door, and the graph would not cross the
+    door.
     """
     path = os.path.join(run_dir, "graph.json")
     if not os.path.exists(path):
@@ -61,7 +65,9 @@ def load_discover_run(
             f"the run's layout {maze!r} is not an embedded maze: build its Door-Key graph with "
             "WorldGraph.build(nodes, task='doorkey', layout=...)"
         )
-    return _native.WorldGraph.build(pivotal_states(run_dir), task="doorkey", maze=maze, seed=seed)
+    return _native.WorldGraph.build(
+        pivotal_states(run_dir), task="doorkey", maze=maze, seed=seed, exhaustive=exhaustive
+    )
 
 
 @dataclass
