@@ -349,4 +349,5 @@ class WorldGraphVectorEnv(VectorEnv):
         return tuple(self._sim.render(i, self.cell_px) for i in range(self.num_envs))
 
     def close_extras(self, **kwargs: Any) -> None:
+        """Releases the simulator (``close()`` calls it once)."""
         self._sim.close()
