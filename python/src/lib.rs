@@ -162,12 +162,20 @@ impl Simulator {
                     dtype.str()?
                 )));
             }
-            if let Ok(a) = actions.extract::<PyReadonlyArray1<'_, u8>>() {
-                for (i, (&v, out)) in a.as_array().iter().zip(self.actions.iter_mut()).enumerate() {
-                    *out = check(i, i64::from(v))?;
-                }
-                return Ok(());
+            // The common dtypes are read in place; the others go through int64.
+            macro_rules! read_as {
+                ($t:ty) => {
+                    if let Ok(a) = actions.extract::<PyReadonlyArray1<'_, $t>>() {
+                        for (i, (&v, out)) in a.as_array().iter().zip(self.actions.iter_mut()).enumerate() {
+                            *out = check(i, v as i64)?;
+                        }
+                        return Ok(());
+                    }
+                };
             }
+            read_as!(u8);
+            read_as!(i64);
+            read_as!(i32);
             // Any other integer dtype: through int64 (NumPy converts).
             let a64 = actions.call_method1("astype", ("int64",))?;
             let a = a64.extract::<PyReadonlyArray1<'_, i64>>()?;
