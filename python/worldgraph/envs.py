@@ -77,7 +77,27 @@ def _new_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**63 - 1))
 
 
-class WorldGraphEnv(gym.Env):
+def _check_render_mode(render_mode: str | None) -> None:
+    if render_mode is not None and render_mode not in _RENDER_MODES:
+        raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+
+
+class _OnSimulator:
+    """What both environments do with the native batch they own."""
+
+    _sim: _native.Simulator
+
+    @property
+    def simulator(self) -> _native.Simulator:
+        """The native batch underneath (the vector env's arrays are its own)."""
+        return self._sim
+
+    def _check_open(self) -> None:
+        if self._sim.closed:
+            raise ClosedEnvironmentError("the environment is closed; make a new one")
+
+
+class WorldGraphEnv(_OnSimulator, gym.Env):
     """One maze environment (``gymnasium.Env``).
 
     Args:
@@ -112,8 +132,7 @@ class WorldGraphEnv(gym.Env):
         render_mode: str | None = None,
         cell_px: int = 16,
     ) -> None:
-        if render_mode is not None and render_mode not in _RENDER_MODES:
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        _check_render_mode(render_mode)
         self._sim = _native.Simulator(
             task,
             maze=None if layout is not None else maze,
@@ -131,16 +150,6 @@ class WorldGraphEnv(gym.Env):
         self.observation_space = observation_space(self._sim.width, self._sim.height)
         self.action_space = spaces.Discrete(self._sim.num_actions)
         self._seeded = False
-        self._act = np.zeros(1, dtype=np.uint8)
-
-    @property
-    def simulator(self) -> _native.Simulator:
-        """The native batch of one environment underneath."""
-        return self._sim
-
-    def _check_open(self) -> None:
-        if self._sim.closed:
-            raise ClosedEnvironmentError("the environment is closed; make a new one")
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"grid": self._sim.grid[0].copy(), "agent": self._sim.agent[0].copy()}
@@ -192,7 +201,7 @@ class WorldGraphEnv(gym.Env):
         super().close()
 
 
-class WorldGraphVectorEnv(VectorEnv):
+class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
     """``num_envs`` maze environments stepped in parallel (``gymnasium.vector.VectorEnv``).
 
     Args:
@@ -234,8 +243,7 @@ class WorldGraphVectorEnv(VectorEnv):
         cell_px: int = 16,
         copy: bool = False,
     ) -> None:
-        if render_mode is not None and render_mode not in _RENDER_MODES:
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        _check_render_mode(render_mode)
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
         if threads is None:
@@ -264,15 +272,6 @@ class WorldGraphVectorEnv(VectorEnv):
         self._obs = {"grid": s.grid, "agent": s.agent}
         self.final_obs = {"grid": s.final_grid, "agent": s.final_agent}
         self._reward, self._terminated, self._truncated = s.reward, s.terminated, s.truncated
-
-    @property
-    def simulator(self) -> _native.Simulator:
-        """The native batch underneath (its arrays are the ones returned)."""
-        return self._sim
-
-    def _check_open(self) -> None:
-        if self._sim.closed:
-            raise ClosedEnvironmentError("the environment is closed; make a new one")
 
     def _observation(self) -> dict[str, np.ndarray]:
         if self.copy:
