@@ -78,7 +78,9 @@ fn parse_maze(maze: &str) -> PyResult<Maze> {
 /// Door-Key task) or ASCII text.
 fn layout_of(task: Task, maze: Option<&str>, layout: Option<&str>) -> PyResult<Layout> {
     match (maze, layout) {
-        (_, Some(text)) => Layout::parse("layout", text).map_err(|e| LayoutError::new_err(e.to_string())),
+        (_, Some(text)) => {
+            Layout::parse("layout", text).map_err(|e| LayoutError::new_err(e.to_string()))
+        }
         (Some(m), None) => Ok(parse_maze(m)?.layout(task.uses_door_key_layout())),
         (None, None) => Err(PyValueError::new_err("give a maze name or a layout")),
     }
@@ -166,7 +168,9 @@ impl Simulator {
             macro_rules! read_as {
                 ($t:ty) => {
                     if let Ok(a) = actions.extract::<PyReadonlyArray1<'_, $t>>() {
-                        for (i, (&v, out)) in a.as_array().iter().zip(self.actions.iter_mut()).enumerate() {
+                        for (i, (&v, out)) in
+                            a.as_array().iter().zip(self.actions.iter_mut()).enumerate()
+                        {
                             *out = check(i, v as i64)?;
                         }
                         return Ok(());
@@ -188,7 +192,11 @@ impl Simulator {
         let values: Vec<Bound<'_, PyAny>> = actions.extract().map_err(|_| {
             PyTypeError::new_err(format!(
                 "actions must be a 1-D integer array or a sequence of {n} ints, got {}",
-                actions.get_type().name().map(|s| s.to_string()).unwrap_or_default()
+                actions
+                    .get_type()
+                    .name()
+                    .map(|s| s.to_string())
+                    .unwrap_or_default()
             ))
         })?;
         if values.len() != n {
@@ -198,7 +206,9 @@ impl Simulator {
             )));
         }
         for (i, v) in values.iter().enumerate() {
-            if v.is_instance_of::<pyo3::types::PyBool>() || v.is_instance_of::<pyo3::types::PyFloat>() {
+            if v.is_instance_of::<pyo3::types::PyBool>()
+                || v.is_instance_of::<pyo3::types::PyFloat>()
+            {
                 return Err(PyTypeError::new_err(format!(
                     "action of environment {i} must be an int, got {}",
                     v.get_type().name()?
@@ -245,8 +255,12 @@ impl Simulator {
                 len[i] = m.episode_len;
                 balls[i] = m.balls;
                 if ended || m.done() {
-                    fa[i * 4..i * 4 + 4]
-                        .copy_from_slice(&[m.end_x as u8, m.end_y as u8, m.end_dir, m.end_carrying]);
+                    fa[i * 4..i * 4 + 4].copy_from_slice(&[
+                        m.end_x as u8,
+                        m.end_y as u8,
+                        m.end_dir,
+                        m.end_carrying,
+                    ]);
                 }
             }
         });
@@ -286,9 +300,17 @@ impl Simulator {
             cfg.max_steps = m;
         }
         if let Some(b) = balls {
-            cfg.balls = if b == 0 { BallSpawn::Layout } else { BallSpawn::Random(b) };
+            cfg.balls = if b == 0 {
+                BallSpawn::Layout
+            } else {
+                BallSpawn::Random(b)
+            };
         }
-        cfg.auto_reset = if autoreset { AutoReset::SameStep } else { AutoReset::Off };
+        cfg.auto_reset = if autoreset {
+            AutoReset::SameStep
+        } else {
+            AutoReset::Off
+        };
         if num_envs == 0 {
             return Err(PyValueError::new_err("num_envs must be at least 1"));
         }
@@ -327,7 +349,8 @@ impl Simulator {
         if let Some(s) = seed {
             let n = self.meta.len();
             self.batch = Some(
-                BatchEnv::new(self.layout.clone(), self.cfg, n, s, self.threads).map_err(sim_err)?,
+                BatchEnv::new(self.layout.clone(), self.cfg, n, s, self.threads)
+                    .map_err(sim_err)?,
             );
             self.seed = s;
         }
@@ -378,11 +401,18 @@ impl Simulator {
     /// An RGB picture (`H·cell_px × W·cell_px × 3`, uint8) of environment
     /// `index` as its observation stands.
     #[pyo3(signature = (index=0, cell_px=16))]
-    fn render<'py>(&mut self, py: Python<'py>, index: usize, cell_px: usize) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    fn render<'py>(
+        &mut self,
+        py: Python<'py>,
+        index: usize,
+        cell_px: usize,
+    ) -> PyResult<Bound<'py, PyArray3<u8>>> {
         self.batch()?;
         let n = self.meta.len();
         if index >= n {
-            return Err(PyValueError::new_err(format!("index {index} out of range 0..{n}")));
+            return Err(PyValueError::new_err(format!(
+                "index {index} out of range 0..{n}"
+            )));
         }
         if !(2..=64).contains(&cell_px) {
             return Err(PyValueError::new_err("cell_px must be in 2..=64"));
@@ -571,7 +601,9 @@ impl WorldGraph {
     fn node(&self, id: i64) -> PyResult<NodeId> {
         let n = self.graph.num_nodes();
         if id < 0 || id as usize >= n {
-            return Err(PlanError::new_err(format!("unknown node {id}: the graph has nodes 0..{n}")));
+            return Err(PlanError::new_err(format!(
+                "unknown node {id}: the graph has nodes 0..{n}"
+            )));
         }
         Ok(NodeId(id as u16))
     }
@@ -595,7 +627,9 @@ impl WorldGraph {
     /// on load; a malformed file raises `PlanError`.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<WorldGraph> {
-        let graph = py.detach(|| planner::WorldGraph::load(&path)).map_err(plan_err)?;
+        let graph = py
+            .detach(|| planner::WorldGraph::load(&path))
+            .map_err(plan_err)?;
         Ok(WorldGraph { graph })
     }
 
@@ -639,7 +673,11 @@ impl WorldGraph {
         let cfg = PlannerConfig {
             candidates: planner::CandidateSet::Given,
             seed,
-            task: if task == Task::DoorKey { Task::DoorKey } else { Task::MultiGoal },
+            task: if task == Task::DoorKey {
+                Task::DoorKey
+            } else {
+                Task::MultiGoal
+            },
             shorten: true,
             edge_search: if exhaustive {
                 planner::EdgeSearch::Exhaustive
