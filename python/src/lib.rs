@@ -673,11 +673,9 @@ impl WorldGraph {
         let cfg = PlannerConfig {
             candidates: planner::CandidateSet::Given,
             seed,
-            task: if task == Task::DoorKey {
-                Task::DoorKey
-            } else {
-                Task::MultiGoal
-            },
+            // The walks follow the task's rules (`PlannerConfig::walk_task`:
+            // MultiGoal-Stochastic walks as MultiGoal).
+            task,
             shorten: true,
             edge_search: if exhaustive {
                 planner::EdgeSearch::Exhaustive
