@@ -28,7 +28,7 @@ test: libtorch
 	  if $(CARGO) tree -p $$crate -e normal --prefix none | grep -q '^iceoryx2 '; then \
 	    echo "$$crate depends on iceoryx2: shm_schemas' ipc feature leaked into it" >&2; exit 1; fi; \
 	done
-	$(MAKE) --no-print-directory python-test
+	$(MAKE) --no-print-directory python-test WORLDGRAPH_REQUIRE_RUST=1
 
 # The venv is (re)made when the pins change; nothing is installed by hand.
 $(VENV)/.requirements: python/requirements.txt
@@ -41,11 +41,15 @@ $(VENV)/.requirements: python/requirements.txt
 python: $(VENV)/.requirements
 	cd python && VIRTUAL_ENV=$(VENV_ABS) PATH="$(VENV_ABS)/bin:$$PATH" maturin develop --release -q
 
-# The package's pytest suite; the differential test runs the Rust reference
-# example the cargo build above made (`make test` fails if it is missing).
+# The package's pytest suite. The differential test runs the Rust reference
+# example (built here), one test loads a run of the `worldgraph` binary's
+# `discover` (built by `make test`'s cargo steps): under `make test`
+# (WORLDGRAPH_REQUIRE_RUST=1) a missing binary fails, alone it is skipped.
 python-test: python
 	$(CARGO) build --release -p sim --example reference_rollout
 	WORLDGRAPH_REFERENCE=$(abspath target/release/examples/reference_rollout) \
+	WORLDGRAPH_BIN=$(abspath target/release/worldgraph) \
+	WORLDGRAPH_REQUIRE_RUST=$(WORLDGRAPH_REQUIRE_RUST) \
 	  $(VENV)/bin/python -m pytest python/tests -q
 
 # env-steps/s from Python: this vector env against Gymnasium's SyncVectorEnv

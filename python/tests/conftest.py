@@ -11,19 +11,32 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[2]
 
 
+def rust_binary(variable: str, default: pathlib.Path, build: str) -> pathlib.Path:
+    """A Rust program a test runs: `$variable`, else `default`. Missing, it
+    fails the test under `make test` (WORLDGRAPH_REQUIRE_RUST=1), which
+    builds it first, and skips it under a bare `pytest`."""
+    path = pathlib.Path(os.environ.get(variable) or default)
+    if not path.exists():
+        if os.environ.get("WORLDGRAPH_REQUIRE_RUST"):
+            pytest.fail(f"{path} does not exist ({variable})")
+        pytest.skip(f"{path} does not exist; build it first: {build}")
+    return path
+
+
 @pytest.fixture(scope="session")
 def reference_binary() -> pathlib.Path:
-    """The Rust reference of the differential test (sim/examples/
-    reference_rollout.rs). `make test` builds it before pytest and sets
-    WORLDGRAPH_REFERENCE, so there a missing binary fails; a bare `pytest`
-    skips the differential test when it was never built."""
-    env = os.environ.get("WORLDGRAPH_REFERENCE")
-    path = pathlib.Path(env) if env else REPO / "target" / "release" / "examples" / "reference_rollout"
-    if not path.exists():
-        if env:
-            pytest.fail(f"WORLDGRAPH_REFERENCE={env} does not exist")
-        pytest.skip("build it first: cargo build --release -p sim --example reference_rollout")
-    return path
+    """The Rust reference of the differential test (sim/examples/reference_rollout.rs)."""
+    return rust_binary(
+        "WORLDGRAPH_REFERENCE",
+        REPO / "target" / "release" / "examples" / "reference_rollout",
+        "cargo build --release -p sim --example reference_rollout",
+    )
+
+
+@pytest.fixture(scope="session")
+def worldgraph_binary() -> pathlib.Path:
+    """The `worldgraph` command line (needs libtorch: `make test` builds it)."""
+    return rust_binary("WORLDGRAPH_BIN", REPO / "target" / "release" / "worldgraph", "make test")
 
 
 @pytest.fixture(scope="session")

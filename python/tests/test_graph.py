@@ -100,3 +100,33 @@ def test_a_graph_round_trips_through_its_file(discover_run: pathlib.Path, tmp_pa
     a, b = farthest_pair(graph)
     assert again.route(a, b).actions == graph.route(a, b).actions
     assert np.array_equal(again.render(4), graph.render(4))
+
+
+def test_a_real_discover_run_loads_and_routes(worldgraph_binary: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    """A run written by `worldgraph discover` itself (one short round, a few
+    seconds), not one shaped like it: its graph.json and pivotal.json load,
+    and a route over its graph replays to its target."""
+    import os
+    import subprocess
+
+    run = tmp_path / "discover"
+    subprocess.run(
+        [str(worldgraph_binary), "discover", "--maze", "small", "--run", str(run), "--rounds", "1",
+         "--gcp-iters", "2", "--envs", "16", "--seed", "3"],
+        check=True,
+        capture_output=True,
+        env={**os.environ, "WORLDGRAPH_TORCH_THREADS": "1"},
+    )
+    graph = worldgraph.load_discover_run(run)
+    assert graph.layout_name == "small" and graph.num_nodes > 1
+    # Every node is a pivotal state (cells the agent cannot stand on are not nodes).
+    assert set(graph.nodes) <= set(worldgraph.pivotal_states(run))
+    a, b = farthest_pair(graph)
+    env = gym.make("worldgraph/MultiGoal-Small-v0", balls=0)
+    obs, _ = env.reset(seed=0)
+    x, y, d, _ = (int(v) for v in obs["agent"])
+    at_a = worldgraph.replay_route(env, graph.route_from_pose(x, y, d, a))
+    at_b = worldgraph.replay_route(env, graph.route(a, b, facing=at_a.dir))
+    assert (at_b.x, at_b.y) == graph.nodes[b]
+    door_key = worldgraph.load_discover_run(run, task="doorkey")
+    assert door_key.task == "doorkey" and door_key.layout_name == "small-doorkey"
