@@ -2,7 +2,13 @@
 # PyPI, crates from crates.io) on first use and cache it.
 CARGO ?= cargo
 
-.PHONY: demo test libtorch bench clean-shm
+.PHONY: demo test libtorch bench clean-shm python python-test bench-python
+
+# The Python package (python/): a project-owned virtual environment with
+# pinned packages from PyPI, the extension built into it by maturin.
+PYTHON ?= python3
+VENV ?= .venv
+VENV_ABS = $(abspath $(VENV))
 
 # The main job on the embedded default.
 demo: libtorch
@@ -22,6 +28,35 @@ test: libtorch
 	  if $(CARGO) tree -p $$crate -e normal --prefix none | grep -q '^iceoryx2 '; then \
 	    echo "$$crate depends on iceoryx2: shm_schemas' ipc feature leaked into it" >&2; exit 1; fi; \
 	done
+	$(MAKE) --no-print-directory python-test WORLDGRAPH_REQUIRE_RUST=1
+
+# The venv is (re)made when the pins change; nothing is installed by hand.
+$(VENV)/.requirements: python/requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/pip install --disable-pip-version-check -q -r python/requirements.txt
+	cp python/requirements.txt $@
+
+# Builds the extension (release) and installs it into the venv, editable:
+# python/worldgraph/ is imported from the source tree.
+python: $(VENV)/.requirements
+	cd python && VIRTUAL_ENV=$(VENV_ABS) PATH="$(VENV_ABS)/bin:$$PATH" maturin develop --release -q
+
+# The package's pytest suite. The differential test runs the Rust reference
+# example (built here), one test loads a run of the `worldgraph` binary's
+# `discover` (built by `make test`'s cargo steps): under `make test`
+# (WORLDGRAPH_REQUIRE_RUST=1) a missing binary fails, alone it is skipped.
+python-test: python
+	$(CARGO) build --release -p sim --example reference_rollout
+	WORLDGRAPH_REFERENCE=$(abspath target/release/examples/reference_rollout) \
+	WORLDGRAPH_BIN=$(abspath target/release/worldgraph) \
+	WORLDGRAPH_REQUIRE_RUST=$(WORLDGRAPH_REQUIRE_RUST) \
+	  $(VENV)/bin/python -m pytest python/tests -q
+
+# env-steps/s from Python: this vector env against Gymnasium's SyncVectorEnv
+# over MiniGrid's own env (installed here from python/requirements-bench.txt).
+bench-python: python
+	$(VENV)/bin/pip install --disable-pip-version-check -q -r python/requirements-bench.txt
+	$(VENV)/bin/python python/bench/bench_envs.py
 
 libtorch:
 	@./scripts/setup-libtorch.sh >/dev/null

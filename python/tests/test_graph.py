@@ -1,0 +1,132 @@
+"""The world graph from Python: a discover run loaded, its pivotal states,
+routes planned by the planner's dynamic programme and replayed in an env."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import worldgraph
+
+
+def test_a_discover_run_loads_with_its_pivotal_states(discover_run: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    cells = [tuple(c) for c in json.loads((discover_run / "pivotal.json").read_text())]
+    assert worldgraph.pivotal_states(discover_run) == cells
+    assert graph.nodes == cells  # every pivotal state of the small maze is a node
+    assert graph.num_nodes == len(cells) and graph.layout_name == "small"
+    assert (graph.width, graph.height) == (13, 13)
+    assert len(graph.edges) > graph.num_nodes
+    for a, b, weight in graph.edges:
+        assert graph.distance(a, b) <= weight
+    x, y = cells[3]
+    assert graph.node_at(x, y) == 3 and graph.node_at(0, 0) is None
+    assert graph.render(8).shape == (13 * 8, 13 * 8, 3)
+
+
+def farthest_pair(graph: worldgraph.WorldGraph) -> tuple[int, int]:
+    best = (0, 0, -1)
+    for a in range(graph.num_nodes):
+        for b in range(graph.num_nodes):
+            d = graph.distance(a, b)
+            if d is not None and d > best[2]:
+                best = (a, b, d)
+    return best[0], best[1]
+
+
+def test_a_route_between_two_cells_replays_to_its_target(discover_run: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    a, b = farthest_pair(graph)
+    env = gym.make("worldgraph/MultiGoal-Small-v0", balls=0)
+    obs, _ = env.reset(seed=0)
+    x, y, d, _ = (int(v) for v in obs["agent"])
+    # From the start pose to node a, then node a to node b.
+    to_a = graph.route_from_pose(x, y, d, a)
+    assert to_a.nodes[-1] == a and to_a.start == (x, y, d)
+    at_a = worldgraph.replay_route(env, to_a)
+    assert (at_a.x, at_a.y) == graph.nodes[a] and not at_a.terminated
+    to_b = graph.route(a, b, facing=at_a.dir)
+    assert to_b.nodes[0] == a and to_b.nodes[-1] == b and len(to_b.nodes) >= 2
+    assert len(to_b) >= graph.distance(a, b)  # edge actions plus the turns between edges
+    at_b = worldgraph.replay_route(env, to_b)
+    assert (at_b.x, at_b.y) == graph.nodes[b]
+    assert at_b.steps == len(to_b) and at_b.reward == pytest.approx(-0.01 * len(to_b))
+
+
+def test_a_door_key_route_fetches_the_key_and_opens_the_door(discover_run: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run, task="doorkey")
+    assert graph.task == "doorkey"
+    layout = worldgraph.maze_text("small", door_key=True).splitlines()
+    assert all(layout[y][x] in ".><^vE" for x, y in graph.nodes)
+    (ex, ey) = next((x, y) for y, row in enumerate(layout) for x, c in enumerate(row) if c == "E")
+    env = gym.make("worldgraph/DoorKey-Small-v0")
+    obs, _ = env.reset(seed=0)
+    # The node nearest the exit lies behind the locked door.
+    target = min(range(graph.num_nodes), key=lambda n: abs(graph.nodes[n][0] - ex) + abs(graph.nodes[n][1] - ey))
+    x, y, d, _ = (int(v) for v in obs["agent"])
+    route = graph.route_from_pose(x, y, d, target, grid=obs["grid"].reshape(-1).tolist(), carrying=int(obs["agent"][3]))
+    assert worldgraph.ACTIONS["pickup"] in route.actions and worldgraph.ACTIONS["toggle"] in route.actions
+    end = worldgraph.replay_route(env, route)
+    assert end.reward == pytest.approx(1.0 - 0.01 * end.steps)  # the door's +1, every step's -0.01
+    assert (end.x, end.y) == graph.nodes[target] and not end.terminated
+
+
+def test_planning_errors_are_python_exceptions(discover_run: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    with pytest.raises(worldgraph.PlanError, match="unknown node"):
+        graph.route(0, graph.num_nodes)
+    with pytest.raises(worldgraph.PlanError, match="unknown node"):
+        graph.distance(-1, 0)
+    with pytest.raises(worldgraph.PlanError):
+        graph.route_from_pose(0, 0, 0, 0)  # a wall: no way onto the graph
+    with pytest.raises(FileNotFoundError, match="no graph.json"):
+        worldgraph.load_discover_run(tmp_path)
+    (tmp_path / "graph.json").write_text('{"format": "something else"}')
+    with pytest.raises(worldgraph.PlanError):
+        worldgraph.load_discover_run(tmp_path)
+    with pytest.raises(worldgraph.PlanError, match="outside"):
+        worldgraph.WorldGraph.build([(40, 1)], maze="small")
+
+
+def test_a_graph_round_trips_through_its_file(discover_run: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    graph.save(tmp_path / "g.json")
+    again = worldgraph.WorldGraph.load(tmp_path / "g.json")
+    assert again.nodes == graph.nodes and again.edges == graph.edges
+    a, b = farthest_pair(graph)
+    assert again.route(a, b).actions == graph.route(a, b).actions
+    assert np.array_equal(again.render(4), graph.render(4))
+
+
+def test_a_real_discover_run_loads_and_routes(worldgraph_binary: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    """A run written by `worldgraph discover` itself (one short round, a few
+    seconds), not one shaped like it: its graph.json and pivotal.json load,
+    and a route over its graph replays to its target."""
+    import os
+    import subprocess
+
+    run = tmp_path / "discover"
+    subprocess.run(
+        [str(worldgraph_binary), "discover", "--maze", "small", "--run", str(run), "--rounds", "1",
+         "--gcp-iters", "2", "--envs", "16", "--seed", "3"],
+        check=True,
+        capture_output=True,
+        env={**os.environ, "WORLDGRAPH_TORCH_THREADS": "1"},
+    )
+    graph = worldgraph.load_discover_run(run)
+    assert graph.layout_name == "small" and graph.num_nodes > 1
+    # Every node is a pivotal state (cells the agent cannot stand on are not nodes).
+    assert set(graph.nodes) <= set(worldgraph.pivotal_states(run))
+    a, b = farthest_pair(graph)
+    env = gym.make("worldgraph/MultiGoal-Small-v0", balls=0)
+    obs, _ = env.reset(seed=0)
+    x, y, d, _ = (int(v) for v in obs["agent"])
+    at_a = worldgraph.replay_route(env, graph.route_from_pose(x, y, d, a))
+    at_b = worldgraph.replay_route(env, graph.route(a, b, facing=at_a.dir))
+    assert (at_b.x, at_b.y) == graph.nodes[b]
+    door_key = worldgraph.load_discover_run(run, task="doorkey")
+    assert door_key.task == "doorkey" and door_key.layout_name == "small-doorkey"

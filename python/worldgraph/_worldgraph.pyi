@@ -1,0 +1,178 @@
+"""Type stubs of the native module ``worldgraph._worldgraph`` (PyO3).
+
+The Gymnasium classes in :mod:`worldgraph.envs` wrap :class:`Simulator`;
+:mod:`worldgraph.graph` wraps :class:`WorldGraph`.
+"""
+
+import os
+
+import numpy as np
+import numpy.typing as npt
+
+class LayoutError(ValueError):
+    """A maze layout was refused; the message names the line and column."""
+
+class ClosedError(RuntimeError):
+    """The simulator was closed; create a new one."""
+
+class PlanError(ValueError):
+    """A world graph could not be loaded, built or queried (unknown node, no route, ...)."""
+
+def maze_text(maze: str, door_key: bool = False) -> str:
+    """The ASCII text of an embedded maze (``small``, ``medium``, ``large``;
+    ``door_key``: its Door-Key variant)."""
+
+def check_layout(text: str) -> tuple[int, int]:
+    """Parses and validates an ASCII layout; returns ``(width, height)`` or
+    raises :class:`LayoutError` naming the line and column."""
+
+class Simulator:
+    """A batch of maze environments stepped in parallel into NumPy arrays.
+
+    Every array attribute is allocated once and rewritten in place by
+    :meth:`reset` and :meth:`step` (its buffer never moves): copy what you
+    keep. Environment ``i`` draws from its own stream seeded by
+    ``(seed, i)``, so results never depend on ``threads``.
+    """
+
+    def __init__(
+        self,
+        task: str,
+        maze: str | None = None,
+        layout: str | None = None,
+        num_envs: int = 1,
+        seed: int = 0,
+        threads: int = 1,
+        max_steps: int | None = None,
+        balls: int | None = None,
+        autoreset: bool = True,
+    ) -> None:
+        """``num_envs`` environments of ``task`` (``multigoal``,
+        ``multigoal-sparse``, ``multigoal-stochastic``, ``doorkey``) on an
+        embedded ``maze`` or an ASCII ``layout``; already reset."""
+    def reset(self, seed: int | None = None) -> None:
+        """Starts a new episode everywhere; ``seed`` re-seeds the batch first."""
+    def step(self, actions: npt.ArrayLike) -> int:
+        """Steps environment ``i`` with ``actions[i]`` (GIL released); returns
+        how many episodes ended. Raises ``ValueError`` for a wrong shape or an
+        out-of-range action, ``TypeError`` for a non-integer array."""
+    def render(self, index: int = 0, cell_px: int = 16) -> npt.NDArray[np.uint8]:
+        """An RGB frame ``(height·cell_px, width·cell_px, 3)`` of environment ``index``."""
+    def close(self) -> None:
+        """Releases the environments; later calls raise :class:`ClosedError`."""
+    @property
+    def closed(self) -> bool: ...
+    @property
+    def num_envs(self) -> int: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def num_actions(self) -> int:
+        """3 for the MultiGoal tasks, 6 for Door-Key."""
+    @property
+    def task(self) -> str: ...
+    @property
+    def max_steps(self) -> int: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def layout_text(self) -> str: ...
+    @property
+    def layout_name(self) -> str: ...
+    @property
+    def grid(self) -> npt.NDArray[np.uint8]:
+        """``(num_envs, height, width)`` cell codes of the observations."""
+    @property
+    def agent(self) -> npt.NDArray[np.uint8]:
+        """``(num_envs, 4)``: x, y, dir, carried object's code (255: nothing)."""
+    @property
+    def final_grid(self) -> npt.NDArray[np.uint8]:
+        """``(num_envs, height, width)``: the grid each episode the last step ended ended on."""
+    @property
+    def final_agent(self) -> npt.NDArray[np.uint8]:
+        """``(num_envs, 4)``: the pose the last action led to, before any auto-reset."""
+    @property
+    def reward(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def terminated(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def truncated(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def episode_return(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def episode_length(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def balls(self) -> npt.NDArray[np.uint8]: ...
+
+class Route:
+    """A planned route: ``actions[i]`` (MiniGrid numbering) leaves the agent
+    on ``cells[i]``; ``nodes`` are the graph nodes passed, first to target."""
+
+    @property
+    def start(self) -> tuple[int, int, int]:
+        """``(x, y, dir)`` the route starts from."""
+    @property
+    def actions(self) -> list[int]: ...
+    @property
+    def cells(self) -> list[tuple[int, int]]: ...
+    @property
+    def nodes(self) -> list[int]: ...
+    def __len__(self) -> int: ...
+
+class WorldGraph:
+    """Pivotal states (nodes), edges with recorded action paths, and
+    all-pairs shortest paths (the planner's dynamic programme)."""
+
+    @staticmethod
+    def load(path: str | os.PathLike[str]) -> WorldGraph:
+        """A graph saved by the planner (a discover run's ``graph.json``)."""
+    @staticmethod
+    def build(
+        nodes: list[tuple[int, int]],
+        task: str = "multigoal",
+        maze: str | None = None,
+        layout: str | None = None,
+        seed: int = 0,
+        exhaustive: bool = False,
+    ) -> WorldGraph:
+        """The graph over the given node cells of a maze or layout."""
+    def save(self, path: str | os.PathLike[str]) -> None: ...
+    @property
+    def num_nodes(self) -> int: ...
+    @property
+    def nodes(self) -> list[tuple[int, int]]:
+        """The nodes (pivotal states) ``(x, y)`` by node id."""
+    @property
+    def edges(self) -> list[tuple[int, int, int]]:
+        """``(from, to, weight)``."""
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def layout_text(self) -> str: ...
+    @property
+    def layout_name(self) -> str: ...
+    @property
+    def task(self) -> str: ...
+    def node_at(self, x: int, y: int) -> int | None: ...
+    def distance(self, a: int, b: int) -> int | None:
+        """Shortest distance from node ``a`` to node ``b``, or None."""
+    def route(self, start: int, target: int, facing: int = 0) -> Route:
+        """Node-to-node route in the layout's initial world."""
+    def route_from_pose(
+        self,
+        x: int,
+        y: int,
+        dir: int,
+        target: int,
+        grid: list[int] | None = None,
+        carrying: int = 255,
+    ) -> Route:
+        """Route from any pose to node ``target``, in the observed world
+        (``grid``, ``carrying``) or the initial one."""
+    def render(self, cell_px: int = 16) -> npt.NDArray[np.uint8]: ...

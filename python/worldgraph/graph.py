@@ -1,0 +1,108 @@
+"""The world graph from Python: load a ``worldgraph discover`` run, list its
+pivotal states, plan routes by the planner's dynamic programme, replay them.
+
+A discover run directory holds ``graph.json`` (the world graph over the
+pivotal states ``V_p``, the planner's format), ``pivotal.json`` (the pivotal
+states as ``[[x, y], ...]``) and ``config.toml``, among others.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from . import _worldgraph as _native
+
+if TYPE_CHECKING:
+    from .envs import WorldGraphEnv
+
+WorldGraph = _native.WorldGraph
+Route = _native.Route
+
+
+def pivotal_states(run_dir: str | os.PathLike[str]) -> list[tuple[int, int]]:
+    """The pivotal states ``(x, y)`` a discover run found (its ``pivotal.json``,
+    else its graph's nodes)."""
+    path = os.path.join(run_dir, "pivotal.json")
+    if os.path.exists(path):
+        with open(path) as f:
+            cells = json.load(f)
+        if not isinstance(cells, list) or not all(
+            isinstance(c, list) and len(c) == 2 and all(isinstance(v, int) for v in c) for c in cells
+        ):
+            raise _native.PlanError(f"{path}: expected a list of [x, y] pairs")
+        return [(c[0], c[1]) for c in cells]
+    return load_discover_run(run_dir).nodes
+
+
+def load_discover_run(
+    run_dir: str | os.PathLike[str], task: str | None = None, seed: int = 0, exhaustive: bool = True
+) -> _native.WorldGraph:
+    """The world graph of a ``worldgraph discover`` run directory.
+
+    Without ``task`` (or for a MultiGoal task), the run's ``graph.json`` as
+    discovered. For ``task="doorkey"``, the run's pivotal states moved to the
+    Door-Key variant of its maze (cells the agent cannot stand on there are
+    dropped) and the graph built again under Door-Key rules, as stage 2
+    does; its edges are shortened by an exact search instead of by ``π_g``
+    (which needs libtorch). With ``exhaustive`` (the default) the Door-Key
+    edges come from a search over states rather than random walks: a walk
+    stops at the first node it meets, so walks seldom find the edges that
+    fetch the key and open the door, and the graph would not cross the
+    door.
+    """
+    path = os.path.join(run_dir, "graph.json")
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{path}: not a discover run directory (no graph.json)")
+    graph = _native.WorldGraph.load(path)
+    if task is None or task.replace("_", "-").lower() != "doorkey" and task.lower() != "door-key":
+        return graph
+    maze = graph.layout_name
+    if maze not in ("small", "medium", "large"):
+        raise _native.PlanError(
+            f"the run's layout {maze!r} is not an embedded maze: build its Door-Key graph with "
+            "WorldGraph.build(nodes, task='doorkey', layout=...)"
+        )
+    return _native.WorldGraph.build(
+        pivotal_states(run_dir), task="doorkey", maze=maze, seed=seed, exhaustive=exhaustive
+    )
+
+
+@dataclass
+class Replay:
+    """What replaying a route did: the pose after the last action, the
+    reward collected, and whether the episode ended on the way."""
+
+    x: int
+    y: int
+    dir: int
+    reward: float
+    terminated: bool
+    truncated: bool
+    steps: int
+
+
+def replay_route(env: WorldGraphEnv, route: _native.Route) -> Replay:
+    """Steps ``env`` (a :class:`worldgraph.WorldGraphEnv` standing at the
+    route's start) through the route's actions, stopping early if the
+    episode ends, and checks each step lands on the cell the route
+    predicted (raises ``AssertionError`` naming the step otherwise)."""
+    total, term, trunc, steps = 0.0, False, False, 0
+    obs = None
+    for i, (a, cell) in enumerate(zip(route.actions, route.cells)):
+        obs, r, term, trunc, _ = env.step(int(a))
+        total += r
+        steps += 1
+        if term or trunc:
+            break
+        got = (int(obs["agent"][0]), int(obs["agent"][1]))
+        if got != tuple(cell):
+            raise AssertionError(f"step {i}: the agent is at {got}, the route expected {tuple(cell)}")
+    if obs is None:
+        s = env.unwrapped.simulator
+        x, y, d = (int(v) for v in s.agent[0][:3])
+    else:
+        x, y, d = (int(v) for v in obs["agent"][:3])
+    return Replay(x, y, d, total, term, trunc, steps)
