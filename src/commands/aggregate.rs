@@ -57,7 +57,7 @@ const COMPARISONS: [(&str, &str, &str); 5] = [
 ];
 
 /// The strata where both `x` and `y` ran: X's and Y's scores per maze and
-/// task, and how many such strata there are.
+/// task, in the same order.
 fn paired_strata(s: &Scores, x: &str, y: &str) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
     let (mut xs, mut ys) = (Vec::new(), Vec::new());
     for ((m, t, c), v) in s {
@@ -136,13 +136,16 @@ pub fn section(
         .iter()
         .map(|(x, y, what)| (x.to_string(), y.to_string(), what.to_string()))
         .collect();
+    // Each configuration once (a set: configurations outside Table 1 share
+    // one sort key, so sorting would not bring their copies together).
     let mut hierarchies: Vec<&String> = s
         .keys()
         .map(|(_, _, c)| c)
         .filter(|c| c.as_str() != "a2c")
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
         .collect();
     hierarchies.sort_by_key(|c| order(c));
-    hierarchies.dedup();
     for c in hierarchies {
         rows.push((c.clone(), "a2c".into(), format!("{} over A2C", display(c))));
     }
