@@ -78,6 +78,21 @@ pub enum Candidates {
     Pivotal,
 }
 
+/// What handing over to a world-graph traversal pays the Worker (section
+/// 4.3 leaves it open: the traversal starts on "a pivotal state with a
+/// route to `g_w`", wherever the Worker met it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HandOver {
+    /// Paid as reaching `g_w`: the route brings the agent there, so
+    /// reaching any node with a route to `g_w` is as good as reaching it.
+    #[default]
+    PaysWideGoal,
+    /// Not paid: the Worker's goal episode ends on the step penalty alone,
+    /// so the Worker is paid only for cells it walks onto itself.
+    Unpaid,
+}
+
 /// Settings of a stage 2 agent. Sizes default to `π_g`'s (the paper
 /// "inherit[s] most hyperparameters from the training of `π_g`"; the
 /// Manager and the Worker "share similar model architecture").
@@ -122,6 +137,8 @@ pub struct AgentConfig {
     /// Fine-tune `π_g` on the traversal steps it steers (MultiGoal-
     /// Stochastic with traversal; [`steering`]).
     pub fine_tune_pi_g: bool,
+    /// What a hand-over to a traversal pays the Worker.
+    pub hand_over: HandOver,
 }
 
 impl Default for AgentConfig {
@@ -142,6 +159,7 @@ impl Default for AgentConfig {
             goal_reward: 1.0,
             step_penalty: -0.01,
             fine_tune_pi_g: true,
+            hand_over: HandOver::default(),
         }
     }
 }
@@ -1187,7 +1205,11 @@ impl HrlAgent {
                 if !s.interval_over && self.graph.is_some() {
                     // Hand over to a traversal from here, if there is one.
                     if self.try_traverse(ctl, &obs, e) {
-                        ctl.envs[e].goal.hand_over(&mut s, goal_r);
+                        let pay = match self.cfg.hand_over {
+                            HandOver::PaysWideGoal => goal_r,
+                            HandOver::Unpaid => 0.0,
+                        };
+                        ctl.envs[e].goal.hand_over(&mut s, pay);
                     }
                 }
                 rewards[e] = s.reward;

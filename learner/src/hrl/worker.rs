@@ -15,9 +15,9 @@
 //! environment's episode; a goal episode cut short by the episode's step
 //! limit (truncation) is bootstrapped from its final state
 //! ([`WorkerStep::bootstrap`]). Handing over to a world-graph traversal
-//! towards `g_w` also ends the goal episode, paid as reaching `g_w` (the
-//! route brings the agent there; the Worker resumes at `g_w` with a fresh
-//! goal episode for `g_n`).
+//! towards `g_w` also ends the goal episode, by default paid as reaching
+//! `g_w` (the route brings the agent there; [`super::HandOver`]); the
+//! Worker resumes at `g_w` with a fresh goal episode for `g_n`.
 
 /// How the environment's episode stands after a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -134,10 +134,11 @@ impl WorkerGoal {
     }
 
     /// Books a hand-over to a traversal towards `g_w` on the step just
-    /// booked as `step`: paid as reaching `g_w`, the goal episode ends.
-    pub fn hand_over(&mut self, step: &mut WorkerStep, goal: f32) {
+    /// booked as `step`: the goal episode ends, paid `pay` unless `g_w`
+    /// was paid already (`goal` when it counts as reaching `g_w`).
+    pub fn hand_over(&mut self, step: &mut WorkerStep, pay: f32) {
         if !self.wide_paid {
-            step.reward += goal;
+            step.reward += pay;
             self.wide_paid = true;
         }
         step.done = true;
@@ -188,6 +189,13 @@ mod tests {
         assert_eq!(s.reward, penalty, "g_w was paid at the hand-over");
         g.hand_over(&mut s, goal);
         assert_eq!(s.reward, penalty);
+        // An unpaid hand-over (HandOver::Unpaid) ends the goal episode on
+        // the step penalty alone.
+        let mut g = WorkerGoal::new(10, 12, 2);
+        let mut s = g.book(4, Running, c, goal, penalty);
+        g.hand_over(&mut s, 0.0);
+        assert_eq!(s.reward, penalty);
+        assert!(s.done);
     }
 
     #[test]
