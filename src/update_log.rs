@@ -57,17 +57,25 @@ pub struct UpdateRow {
     pub traversal_share: f64,
     /// Env steps per second of the update.
     pub sps: f64,
+    /// Share of the training episodes that ended during the update by
+    /// reaching the exit (`NaN` when none ended).
+    pub exit_share: f64,
+    /// Share of the Manager's decisions during the update whose narrow goal
+    /// `g_n` is the exit (0 for A2C).
+    pub exit_goal_share: f64,
 }
 
 /// The CSV header, the fields of [`UpdateRow`] in order.
-pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps";
+pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share";
+/// Fields of a row written before the exit columns (read on resume).
+const OLD_FIELDS: usize = 15;
 
 impl UpdateRow {
     fn csv_line(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1}",
+            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6}",
             self.update,
             self.env_steps,
             self.wall_seconds,
@@ -82,16 +90,20 @@ impl UpdateRow {
             self.intervals,
             self.goals_reached,
             self.traversal_share,
-            self.sps
+            self.sps,
+            self.exit_share,
+            self.exit_goal_share
         );
         s
     }
 
     /// Parses one CSV line; `None` for a malformed one (a line a killed
-    /// process left half written).
+    /// process left half written). A row of an earlier version, without the
+    /// exit columns, reads with them `NaN`.
     fn parse(line: &str) -> Option<UpdateRow> {
         let f: Vec<&str> = line.trim_end().split(',').collect();
-        if f.len() != HEADER.split(',').count() {
+        let old = f.len() == OLD_FIELDS;
+        if f.len() != HEADER.split(',').count() && !old {
             return None;
         }
         let x = |i: usize| f[i].parse::<f64>().ok();
@@ -112,6 +124,8 @@ impl UpdateRow {
             goals_reached: x(12)?,
             traversal_share: x(13)?,
             sps: x(14)?,
+            exit_share: if old { f64::NAN } else { x(15)? },
+            exit_goal_share: if old { f64::NAN } else { x(16)? },
         })
     }
 
@@ -126,6 +140,7 @@ impl UpdateRow {
         ];
         if self.episodes > 0 {
             v.push(("charts/episodic_return", self.episodic_return));
+            v.push(("charts/exit_share", self.exit_share));
         }
         if hierarchy {
             v.extend([
@@ -134,6 +149,7 @@ impl UpdateRow {
                 ("losses/manager_entropy", self.manager_entropy),
                 ("hrl/goals_reached", self.goals_reached),
                 ("hrl/traversal_share", self.traversal_share),
+                ("hrl/exit_goal_share", self.exit_goal_share),
             ]);
         }
         v
@@ -253,6 +269,22 @@ mod tests {
     }
 
     #[test]
+    fn a_row_round_trips_and_a_row_of_an_earlier_version_reads_without_its_exit_figures() {
+        let r = UpdateRow {
+            exit_share: 0.125,
+            exit_goal_share: 0.5,
+            ..row(4)
+        };
+        assert_eq!(UpdateRow::parse(&r.csv_line()), Some(r));
+        // The 15 fields an earlier version wrote, then a half-written line.
+        let old = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0";
+        let o = UpdateRow::parse(old).expect("an earlier row reads");
+        assert_eq!((o.update, o.env_steps, o.intervals), (4, 7680, 7));
+        assert!(o.exit_share.is_nan() && o.exit_goal_share.is_nan());
+        assert_eq!(UpdateRow::parse("4,7680,1.000,1,0.5"), None);
+    }
+
+    #[test]
     fn a_resumed_log_is_the_log_of_an_uninterrupted_run() {
         let whole = tempfile::tempdir().unwrap();
         let mut log = UpdateLog::open(whole.path(), 0, false).unwrap();
@@ -290,7 +322,8 @@ mod tests {
 
         // The events hold the same scalars (wall times aside): one
         // TensorBoard file, the version record, then one record per
-        // scalar, with `charts/episodic_return` only where episodes ended.
+        // scalar, with `charts/episodic_return` and `charts/exit_share`
+        // only where episodes ended.
         let events = |d: &Path| {
             let files: Vec<_> = std::fs::read_dir(d.join(TENSORBOARD_DIR))
                 .unwrap()
@@ -302,7 +335,7 @@ mod tests {
         let (ra, rb) = (records(&ea), records(&eb));
         assert_eq!(ra.len(), rb.len());
         let with_return = (1..=6).filter(|u| u % 3 != 0).count();
-        assert_eq!(ra.len(), 1 + 6 * 4 + with_return);
+        assert_eq!(ra.len(), 1 + 6 * 4 + 2 * with_return);
         let tagged = |rs: &[&[u8]], tag: &str| {
             rs.iter()
                 .filter(|r| r.windows(tag.len()).any(|w| w == tag.as_bytes()))
@@ -310,6 +343,7 @@ mod tests {
         };
         assert_eq!(tagged(&ra, "charts/SPS"), 6);
         assert_eq!(tagged(&rb, "charts/episodic_return"), with_return);
+        assert_eq!(tagged(&rb, "charts/exit_share"), with_return);
         assert!(ra[0].windows(13).any(|w| w == b"brain.Event:2"));
     }
 }

@@ -294,8 +294,10 @@ fn a_killed_run_resumes_and_ends_as_an_uninterrupted_one() {
             .lines()
             .map(|l| {
                 let f: Vec<&str> = l.split(',').collect();
+                // Column 14 is sps.
                 let mut keep = vec![f[0], f[1]];
-                keep.extend(&f[3..f.len() - 1]);
+                keep.extend(&f[3..14]);
+                keep.extend(&f[15..]);
                 keep.join(",")
             })
             .collect()
@@ -303,6 +305,11 @@ fn a_killed_run_resumes_and_ends_as_an_uninterrupted_one() {
     let rows = learning(&whole);
     assert_eq!(rows.len(), 1 + 20, "{rows:?}");
     assert!(rows[0].starts_with("update,env_steps,episodes,episodic_return,policy_loss"));
+    assert!(
+        rows[0].ends_with(",exit_share,exit_goal_share"),
+        "{}",
+        rows[0]
+    );
     assert_eq!(rows, learning(&killed));
     for run in [&whole, &killed] {
         let tb: Vec<_> = std::fs::read_dir(run.join("tensorboard"))

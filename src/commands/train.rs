@@ -1068,6 +1068,12 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                     goals_reached: s.goals_reached,
                     traversal_share: s.traversal_share,
                     sps: s.env_steps as f64 / t0.elapsed().as_secs_f64().max(1e-9),
+                    exit_share: if s.episodes > 0 {
+                        s.exit_share
+                    } else {
+                        f64::NAN
+                    },
+                    exit_goal_share: s.exit_goal_share,
                 })?;
             }
             bar.inc(1);

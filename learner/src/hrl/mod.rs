@@ -346,6 +346,12 @@ pub struct IterationStats {
     pub goals_reached: f64,
     /// Share of env steps taken by graph traversal.
     pub traversal_share: f64,
+    /// Share of the episodes that ended by reaching the exit.
+    pub exit_share: f64,
+    /// Manager decisions made (FN, WN).
+    pub decisions: usize,
+    /// Share of those whose narrow goal `g_n` is the exit.
+    pub exit_goal_share: f64,
 }
 
 /// The result of an evaluation: one episode per environment.
@@ -849,15 +855,16 @@ impl HrlAgent {
         obs: &ObsView<'_>,
         record: bool,
         trace: &mut Option<(usize, u32, &mut EpisodeTrace)>,
-    ) {
+    ) -> Decisions {
+        let mut made = Decisions::default();
         let Some(manager) = &self.manager else {
-            return;
+            return made;
         };
         let who: Vec<usize> = (0..ctl.envs.len())
             .filter(|&e| ctl.envs[e].need_decision)
             .collect();
         if who.is_empty() {
-            return;
+            return made;
         }
         let idx = Tensor::from_slice(&who.iter().map(|&e| e as i64).collect::<Vec<_>>());
         let mut input = CellInput::new(self.width, self.height, 0);
@@ -964,10 +971,14 @@ impl HrlAgent {
             c.need_decision = false;
             c.manager_reset = false;
             c.goal = WorkerGoal::new(gw, gn, obs.meta[e].cell(self.width) as u32);
+            made.count += 1;
+            made.exit_goals +=
+                usize::from(obs.env_cells(e).get(gn as usize) == Some(&(sim::Object::Exit as u8)));
         }
         // A fresh goal episode for the Worker.
         let fresh: Vec<bool> = (0..ctl.envs.len()).map(|e| who.contains(&e)).collect();
         ctl.worker_state = ctl.worker_state.reset_done(&mask(&fresh));
+        made
     }
 
     /// Starts a traversal for environment `e` if it stands on a node with a
@@ -1072,7 +1083,7 @@ impl HrlAgent {
         let steered;
         let (actions, out_state) = {
             let obs = env.observe();
-            self.decide(ctl, &obs, train, &mut trace);
+            stats.add(self.decide(ctl, &obs, train, &mut trace));
             if self.graph.is_some() {
                 for e in 0..n {
                     self.try_traverse(ctl, &obs, e);
@@ -1301,7 +1312,7 @@ impl HrlAgent {
         }
         {
             let obs = env.observe();
-            self.decide(&mut ctl, &obs, true, &mut None);
+            counts.add(self.decide(&mut ctl, &obs, true, &mut None));
             let goals = self.goal_marks(&ctl);
             let marks = self.hierarchical().then(|| GoalMarks {
                 cells: &goals,
@@ -1372,6 +1383,9 @@ impl HrlAgent {
                 0.0
             },
             traversal_share: counts.traversal_steps as f64 / counts.steps.max(1) as f64,
+            exit_share: counts.successes as f64 / counts.episodes.max(1) as f64,
+            decisions: counts.decisions,
+            exit_goal_share: counts.exit_goals as f64 / counts.decisions.max(1) as f64,
         })
     }
 
@@ -1599,6 +1613,23 @@ struct StepCounts {
     intervals: usize,
     reached: usize,
     traversal_steps: u64,
+    decisions: usize,
+    exit_goals: usize,
+}
+
+impl StepCounts {
+    fn add(&mut self, d: Decisions) {
+        self.decisions += d.count;
+        self.exit_goals += d.exit_goals;
+    }
+}
+
+/// The Manager's decisions of one call of [`HrlAgent::decide`].
+#[derive(Debug, Default, Clone, Copy)]
+struct Decisions {
+    count: usize,
+    /// Decisions whose narrow goal `g_n` is an exit cell.
+    exit_goals: usize,
 }
 
 #[cfg(test)]
