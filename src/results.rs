@@ -90,8 +90,7 @@ pub struct RunResult {
     pub torch_threads: usize,
     /// Runs side by side on the machine while it ran.
     pub jobs: usize,
-    /// The commit it ran on (`git rev-parse HEAD`; `+dirty` if the tree had
-    /// changes).
+    /// The commit the binary that ran it was built from ([`build_commit`]).
     pub commit: String,
 }
 
@@ -115,7 +114,7 @@ pub struct DiscoverResult {
     pub grid: String,
     /// `discovery.json` of the run, as `discover` wrote it.
     pub summary: serde_json::Value,
-    /// The commit it ran on.
+    /// The commit the binary that ran it was built from ([`build_commit`]).
     pub commit: String,
 }
 
@@ -200,22 +199,10 @@ fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The commit of the working tree, `+dirty` when tracked files changed;
-/// `unknown` outside a git checkout.
-pub fn current_commit() -> String {
-    let git = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
-    match git(&["rev-parse", "HEAD"]) {
-        Some(head) => match git(&["status", "--porcelain", "--untracked-files=no"]) {
-            Some(s) if !s.is_empty() => format!("{head}+dirty"),
-            _ => head,
-        },
-        None => "unknown".to_string(),
-    }
+/// The commit the binary was built from (`+dirty` when tracked files had
+/// changes, `unknown` outside a git checkout; `build.rs`), not the working
+/// tree's at run time: a grid keeps running on its binary while the
+/// repository moves on, and its summaries must name the code that ran.
+pub fn build_commit() -> String {
+    env!("WORLDGRAPH_BUILD_COMMIT").to_string()
 }

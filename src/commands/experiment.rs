@@ -28,7 +28,7 @@ use sim::{Maze, Task};
 
 use super::train::{TestSummary, TrainConfig};
 use crate::results::{
-    CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, current_commit,
+    CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, build_commit,
     discover_path, read_run, run_path,
 };
 
@@ -772,7 +772,7 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
         results: a.results.clone(),
         threads: a.threads.max(1),
         jobs: a.jobs.unwrap_or((cores / a.threads.max(1)).max(1)).max(1),
-        commit: current_commit(),
+        commit: build_commit(),
         grid_label: grid_path.display().to_string(),
         grid,
     };
@@ -1124,7 +1124,7 @@ fn reproduce(summary: &Path, a: &ExperimentArgs) -> anyhow::Result<std::process:
         results: work.join("results"),
         threads: r.torch_threads,
         jobs: 1,
-        commit: current_commit(),
+        commit: build_commit(),
     };
     let graph = match &r.discover {
         Some(spec) => {
