@@ -67,7 +67,8 @@ pub struct BenchLearnerArgs {
     #[arg(long, default_value_t = 2)]
     pub threads: i32,
     /// Seconds of measurement in total, split into alternating windows of
-    /// the fast and the plain path.
+    /// the fast and the plain path (the PyTorch reference then gets as
+    /// many, split among its variants).
     #[arg(long, default_value_t = 12.0)]
     pub seconds: f64,
     /// Print one JSON object instead of a table.
