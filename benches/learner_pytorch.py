@@ -43,10 +43,14 @@ What it implements, per agent (sizes of ``AgentConfig::default()`` and
   window side: ``--window`` (the Rust bench passes its own), else the
   smallest odd side from 5 (7 beyond 25 columns) whose windows cover every
   free cell, as ``wide_narrow::covering_side``. Simplified: no world-graph
-  traversal (the Rust bench's WN traverses, and the Worker's loss skips the
-  traversal steps with weight 0; its network still runs at every env step,
-  so the compute per env step is the same, but the Manager's decision rate
-  can differ: both sides report it).
+  traversal. The Rust bench's WN traverses; the Worker's network still runs
+  at every env step there (its loss skips the traversal steps with weight
+  0), so the compute per env step is the same, but traversal steps do not
+  count towards the horizon ``c``, so its intervals are longer and its
+  Manager decides less often. To match the Manager's work per env step, the
+  Rust bench passes ``--horizon`` = 1 / its measured decisions per env step
+  (the Worker steps after which an interval ends here); both sides report
+  their decisions per env step.
 
 The update is computed two ways, both ordinary PyTorch: ``per-step`` keeps
 every step's autograd graph (acting with gradient) and back-propagates
@@ -547,7 +551,7 @@ class WnDriver:
         self.learner = EveryStep(net, self.planes, n, args.rollout, path, 0.99, 0.95, 7e-4, args.fused_adam)
         self.mparams = list(self.manager.parameters())
         self.mopt = make_optimizer(self.mparams, 7e-4, args.fused_adam)
-        self.gamma, self.horizon = 0.99, max(args.rollout // 3, 1)
+        self.gamma, self.horizon = 0.99, args.horizon or max(args.rollout // 3, 1)
         self.mstate = self.manager.trunk.zeros(n)
         self.minit = self.manager.trunk.zeros(n)
         self.need = np.ones(n, bool)
@@ -809,6 +813,9 @@ def main(argv=None) -> int:
         help="torch.optim.Adam(fused=True) (default on; off: foreach)",
     )
     p.add_argument("--window", type=int, default=0, help="WN narrow window side (0: covering side, as the Rust agent)")
+    p.add_argument(
+        "--horizon", type=int, default=0, help="WN Manager horizon c in Worker steps (0: a third of the rollout, as Rust)"
+    )
     args = p.parse_args(argv)
     if args.envs < 1 or args.threads < 1 or args.seconds <= 0:
         p.error("--envs and --threads must be ≥ 1, --seconds > 0")
@@ -901,6 +908,7 @@ def main(argv=None) -> int:
     if args.agent == "wn":
         report["manager_decisions_per_env_step"] = f["manager_decisions_per_env_step"]
         report["window_side"] = d.side
+        report["horizon"] = d.horizon
         report["candidates"] = len(d.cands)
     print(json.dumps(report))
     return 0

@@ -395,7 +395,10 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         plain.flops(GradPath::Plain),
     );
     let (layout, env_cfg) = a.world.build()?;
-    let (pytorch, pytorch_note) = pytorch_reference(&a, rollout, fast.window_side())?;
+    let decisions_per_step = fast_decisions as f64 / fast_steps.max(1) as f64;
+    let horizon = (a.agent == BenchAgent::Wn && fast_decisions > 0)
+        .then(|| (1.0 / decisions_per_step).round().max(1.0) as usize);
+    let (pytorch, pytorch_note) = pytorch_reference(&a, rollout, fast.window_side(), horizon)?;
     let fast_over_pytorch = pytorch
         .as_ref()
         .map(|p| fast_fig.env_steps_per_sec / p.env_steps_per_sec.max(1e-9));
@@ -412,7 +415,7 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         speedup: median(ratios),
         matmul_gflops: gflops,
         manager_decisions_per_env_step: matches!(a.agent, BenchAgent::Fn | BenchAgent::Wn)
-            .then(|| fast_decisions as f64 / fast_steps.max(1) as f64),
+            .then_some(decisions_per_step),
         pytorch,
         fast_over_pytorch,
         pytorch_note,
@@ -498,11 +501,16 @@ fn tail(text: &str) -> String {
 
 /// Runs the PyTorch reference (`benches/learner_pytorch.py`) as
 /// `--pytorch` asks: its figures, or `None` and a note saying why not (an
-/// error under `--pytorch required`).
+/// error under `--pytorch required`). For WN it gets the Rust agent's
+/// window side and, as its Manager horizon, one over the Rust agent's
+/// measured decisions per env step (the reference does not traverse, and
+/// traversal steps lengthen the Rust agent's intervals), so both Managers
+/// do about the same work per env step.
 fn pytorch_reference(
     a: &BenchLearnerArgs,
     rollout: usize,
     window_side: Option<usize>,
+    horizon: Option<usize>,
 ) -> anyhow::Result<(Option<PytorchFigures>, Option<String>)> {
     let agent = match a.agent {
         BenchAgent::Gcp => "gcp",
@@ -566,6 +574,9 @@ fn pytorch_reference(
         .args(["--seed", &a.world.seed.to_string()]);
     if let Some(side) = window_side {
         cmd.args(["--window", &side.to_string()]);
+    }
+    if let Some(h) = horizon {
+        cmd.args(["--horizon", &h.to_string()]);
     }
     // Its own start-up, warm-up and windows: generous, but bounded.
     let limit = Duration::from_secs_f64(a.seconds * 4.0 + 300.0);
@@ -653,7 +664,13 @@ fn print_table(r: &LearnerBenchReport) {
         100.0 * r.share_of_bound
     );
     if let Some(d) = r.manager_decisions_per_env_step {
-        println!("Manager decisions per env step (fast path): {d:.4}");
+        let reference = r
+            .pytorch
+            .as_ref()
+            .and_then(|p| p.report["manager_decisions_per_env_step"].as_f64())
+            .map(|p| format!(", PyTorch reference {p:.4}"))
+            .unwrap_or_default();
+        println!("Manager decisions per env step: fast path {d:.4}{reference}");
     }
     match (&r.pytorch, r.fast_over_pytorch) {
         (Some(p), Some(ratio)) => {
