@@ -2,7 +2,7 @@
 # PyPI, crates from crates.io) on first use and cache it.
 CARGO ?= cargo
 
-.PHONY: demo test libtorch bench clean-shm python python-test bench-python
+.PHONY: demo test libtorch bench clean-shm python python-test bench-python torch-python bench-learner-python
 
 # The Python package (python/): a project-owned virtual environment with
 # pinned packages from PyPI, the extension built into it by maturin.
@@ -57,6 +57,26 @@ python-test: python
 bench-python: python
 	$(VENV)/bin/pip install --disable-pip-version-check -q -r python/requirements-bench.txt
 	$(VENV)/bin/python python/bench/bench_envs.py
+
+# PyTorch for the reference of `worldgraph bench learner`
+# (benches/learner_pytorch.py), pinned in python/requirements-torch.txt to
+# the libtorch the Rust learners link; from PyPI (pip may reuse the wheel
+# scripts/setup-libtorch.sh cached). Not needed by `make test`.
+WORLDGRAPH_CACHE ?= $(HOME)/.cache/worldgraph
+$(VENV)/.requirements-torch: python/requirements-torch.txt $(VENV)/.requirements
+	$(VENV)/bin/pip install --disable-pip-version-check -q \
+	  --find-links $(WORLDGRAPH_CACHE)/wheels -r python/requirements-torch.txt
+	$(VENV)/bin/python -c "import torch; torch.ones(2).sum()"
+	cp python/requirements-torch.txt $@
+
+torch-python: python $(VENV)/.requirements-torch
+
+# The learner's env-steps/s against the PyTorch reference of the same
+# networks and update, measured in the same run (the bench finds
+# .venv/bin/python). Another agent or maze:
+# `worldgraph bench learner --agent wn --maze medium --threads 1`.
+bench-learner-python: libtorch torch-python
+	$(CARGO) run --release --bin worldgraph -- bench learner --agent a2c --maze small --threads 1 --seconds 12
 
 libtorch:
 	@./scripts/setup-libtorch.sh >/dev/null

@@ -44,7 +44,8 @@ Environment:
   WORLDGRAPH_LOG            the log filter, tracing's EnvFilter syntax (e.g. debug, learner=debug) [default: info]
   WORLDGRAPH_CACHE          where scripts/setup-libtorch.sh keeps libtorch [default: ~/.cache/worldgraph]
   WORLDGRAPH_FIRST_LAYER    dense: the plain first convolution instead of gather-and-sum (measurements)
-  WORLDGRAPH_GRAD_PATH      bench learner's fast path: recompute or per-step [default: per-step]";
+  WORLDGRAPH_GRAD_PATH      bench learner's fast path: recompute or per-step [default: per-step]
+  WORLDGRAPH_PYTHON         bench learner's Python for the PyTorch reference [default: .venv/bin/python, else python3]";
 
 #[derive(Debug, Subcommand)]
 enum Command {

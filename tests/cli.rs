@@ -581,7 +581,92 @@ fn help_lists_the_environment_variables_the_commands_read() {
         "WORLDGRAPH_CACHE",
         "WORLDGRAPH_FIRST_LAYER",
         "WORLDGRAPH_GRAD_PATH",
+        "WORLDGRAPH_PYTHON",
     ] {
         assert!(help.contains(var), "{var} is not in --help:\n{help}");
     }
+}
+
+/// `bench learner` without a Python that has torch (issue 26): the Rust
+/// paths are measured, the PyTorch figure is null with a note that says how
+/// to install it; `--pytorch required` refuses instead, `--pytorch off`
+/// says it is off.
+#[test]
+fn bench_learner_without_torch_reports_a_null_pytorch_figure_and_a_note() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let python = write(
+        dir.path(),
+        "python",
+        "#!/bin/sh\necho \"ModuleNotFoundError: No module named 'torch'\" >&2\nexit 1\n",
+    );
+    std::fs::set_permissions(&python, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let bench = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+            .args([
+                "bench",
+                "learner",
+                "--agent",
+                "a2c",
+                "--maze",
+                "small",
+                "--envs",
+                "4",
+                "--rollout",
+                "4",
+                "--threads",
+                "1",
+                "--seconds",
+                "0.3",
+                "--json",
+            ])
+            .args(extra)
+            .env("WORLDGRAPH_PYTHON", &python)
+            .output()
+            .expect("run worldgraph")
+    };
+    let report = |out: &Output| -> serde_json::Value {
+        assert!(
+            out.status.success(),
+            "stderr: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).expect("one JSON object")
+    };
+    let r = report(&bench(&[]));
+    assert!(
+        r["fast"]["env_steps_per_sec"]
+            .as_f64()
+            .is_some_and(|v| v > 0.0),
+        "{r}"
+    );
+    assert!(
+        r["pytorch"].is_null() && r["fast_over_pytorch"].is_null(),
+        "{r}"
+    );
+    let note = r["pytorch_note"].as_str().unwrap_or_default();
+    assert!(
+        note.contains("No module named 'torch'")
+            && note.contains(&python)
+            && note.contains("make bench-learner-python"),
+        "{note}"
+    );
+    assert!(
+        r["manager_decisions_per_env_step"].is_null(),
+        "A2C has no Manager: {r}"
+    );
+
+    let out = bench(&["--pytorch", "required"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--pytorch required"), "{err}");
+
+    let r = report(&bench(&["--pytorch", "off"]));
+    assert!(r["pytorch"].is_null(), "{r}");
+    assert!(
+        r["pytorch_note"]
+            .as_str()
+            .is_some_and(|n| n.contains("--pytorch off")),
+        "{r}"
+    );
 }

@@ -19,7 +19,9 @@ pub enum BenchCommand {
     /// one process and over Unix sockets.
     Pipeline(super::bench_pipeline::BenchPipelineArgs),
     /// Training throughput of a learner (π_g, A2C, FN, WN): the fast path
-    /// against the plain one, where the time goes, FLOPs against a matmul.
+    /// against the plain one, where the time goes, FLOPs against a matmul,
+    /// and against the PyTorch reference of the same update when `torch`
+    /// is importable.
     Learner(super::bench_learner::BenchLearnerArgs),
     /// Route-query latency and all-pairs shortest-path rebuild time.
     Planner(super::bench_planner::BenchPlannerArgs),

@@ -3,9 +3,14 @@
 //! same updates through the plain path (dense first convolution, autograd
 //! at every rollout step) measured in alternating windows of the same run.
 //! Also the model's FLOPs per env-step against a dense matrix product's
-//! GFLOP/s on the same threads.
+//! GFLOP/s on the same threads, and, after the Rust windows, the PyTorch
+//! reference of the same networks and update (`benches/learner_pytorch.py`,
+//! issue 26) on the same maze, batch, rollout and threads when a Python
+//! with `torch` is found: the fast path's env-steps/s as a ratio to it.
 
-use std::time::Instant;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use learner::a2c::PhaseTimes;
@@ -31,6 +36,19 @@ pub enum BenchAgent {
     Wn,
 }
 
+/// Whether to measure the PyTorch reference.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PytorchMode {
+    /// When a Python with `torch` is found; otherwise a note says how to
+    /// install it (`make bench-learner-python`).
+    Auto,
+    /// Never.
+    Off,
+    /// Always: fail when it cannot run.
+    Required,
+}
+
 /// `bench learner` options.
 #[derive(Debug, Clone, Args)]
 pub struct BenchLearnerArgs {
@@ -49,12 +67,22 @@ pub struct BenchLearnerArgs {
     #[arg(long, default_value_t = 2)]
     pub threads: i32,
     /// Seconds of measurement in total, split into alternating windows of
-    /// the fast and the plain path.
+    /// the fast and the plain path (the PyTorch reference then gets as
+    /// many, split among its variants).
     #[arg(long, default_value_t = 12.0)]
     pub seconds: f64,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// The PyTorch reference (`benches/learner_pytorch.py`: the same
+    /// networks and update in PyTorch, on the same environments through the
+    /// Python package), run after the Rust windows for `--seconds` on the
+    /// same agent, maze, batch, rollout and threads (gcp, a2c and wn only).
+    /// Its Python is `WORLDGRAPH_PYTHON`, else the repository's
+    /// `.venv/bin/python`, else `python3`; `make bench-learner-python`
+    /// installs `torch` there.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub pytorch: PytorchMode,
 }
 
 /// Figures of one path.
@@ -115,6 +143,35 @@ pub struct LearnerBenchReport {
     pub matmul_gflops: f64,
     /// Fast path's achieved GFLOP/s over the matmul bound.
     pub share_of_bound: f64,
+    /// Manager decisions per env step of the fast path (FN, WN; `None`
+    /// for the others).
+    pub manager_decisions_per_env_step: Option<f64>,
+    /// The PyTorch reference's figures (`None` when it did not run; see
+    /// `pytorch_note`).
+    pub pytorch: Option<PytorchFigures>,
+    /// Fast path's env-steps/s over the PyTorch reference's.
+    pub fast_over_pytorch: Option<f64>,
+    /// Why the PyTorch reference did not run (or what to know about it).
+    pub pytorch_note: Option<String>,
+}
+
+/// What the PyTorch reference measured (run after the Rust windows).
+#[derive(Debug, Clone, Serialize)]
+pub struct PytorchFigures {
+    /// Training env-steps per second (median over its windows, of its
+    /// faster gradient path).
+    pub env_steps_per_sec: f64,
+    /// The variant reported, its fastest: gradient path (`per-step` or
+    /// `recompute`) and layout (`nchw` or `channels-last`).
+    pub variant: String,
+    /// `torch.__version__`.
+    pub torch_version: String,
+    /// Share of its time spent stepping the environments.
+    pub env_share: f64,
+    /// The Python that ran it.
+    pub python: String,
+    /// The script's whole JSON report.
+    pub report: serde_json::Value,
 }
 
 /// A learner the bench can train.
@@ -124,16 +181,23 @@ enum Learner {
 }
 
 impl Learner {
-    fn iterate(&mut self, env: &mut dyn BatchEnvironment) -> anyhow::Result<()> {
-        match self {
+    /// One training iteration; returns the Manager's decisions in it (its
+    /// intervals that ended; 0 without a Manager).
+    fn iterate(&mut self, env: &mut dyn BatchEnvironment) -> anyhow::Result<u64> {
+        Ok(match self {
             Learner::Gcp(g) => {
                 g.train_iteration(env, None)?;
+                0
             }
-            Learner::Hrl(a) => {
-                a.train_iteration(env)?;
-            }
+            Learner::Hrl(a) => a.train_iteration(env)?.intervals as u64,
+        })
+    }
+    /// The narrow window's side (WN).
+    fn window_side(&self) -> Option<usize> {
+        match self {
+            Learner::Hrl(a) => a.window_coverage().map(|c| c.side),
+            Learner::Gcp(_) => None,
         }
-        Ok(())
     }
     fn take_times(&mut self) -> PhaseTimes {
         match self {
@@ -275,21 +339,24 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
     let (mut fast_times, mut plain_times) = (PhaseTimes::default(), PhaseTimes::default());
     let (mut fast_wall, mut plain_wall) = (0.0, 0.0);
     let (mut fast_steps, mut plain_steps) = (0u64, 0u64);
+    let mut fast_decisions = 0u64;
     let bar = crate::progress::bar(2 * WINDOWS as u64, "bench learner windows");
     for _ in 0..WINDOWS {
-        let measure = |l: &mut Learner, env: &mut InProcess| -> anyhow::Result<(f64, f64, u64)> {
-            let start = Instant::now();
-            let mut steps = 0;
-            while start.elapsed().as_secs_f64() < window {
-                l.iterate(env)?;
-                steps += steps_per_iter;
-            }
-            let wall = start.elapsed().as_secs_f64();
-            Ok((steps as f64 / wall, wall, steps))
-        };
-        let (rf, wf, sf) = measure(&mut fast, &mut fast_env)?;
+        let measure =
+            |l: &mut Learner, env: &mut InProcess| -> anyhow::Result<(f64, f64, u64, u64)> {
+                let start = Instant::now();
+                let (mut steps, mut decisions) = (0, 0);
+                while start.elapsed().as_secs_f64() < window {
+                    decisions += l.iterate(env)?;
+                    steps += steps_per_iter;
+                }
+                let wall = start.elapsed().as_secs_f64();
+                Ok((steps as f64 / wall, wall, steps, decisions))
+            };
+        let (rf, wf, sf, df) = measure(&mut fast, &mut fast_env)?;
+        fast_decisions += df;
         bar.inc(1);
-        let (rp, wp, sp) = measure(&mut plain, &mut plain_env)?;
+        let (rp, wp, sp, _) = measure(&mut plain, &mut plain_env)?;
         bar.inc(1);
         fast_times.add(&fast.take_times());
         plain_times.add(&plain.take_times());
@@ -328,6 +395,13 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         plain.flops(GradPath::Plain),
     );
     let (layout, env_cfg) = a.world.build()?;
+    let decisions_per_step = fast_decisions as f64 / fast_steps.max(1) as f64;
+    let horizon = (a.agent == BenchAgent::Wn && fast_decisions > 0)
+        .then(|| (1.0 / decisions_per_step).round().max(1.0) as usize);
+    let (pytorch, pytorch_note) = pytorch_reference(&a, rollout, fast.window_side(), horizon)?;
+    let fast_over_pytorch = pytorch
+        .as_ref()
+        .map(|p| fast_fig.env_steps_per_sec / p.env_steps_per_sec.max(1e-9));
     let report = LearnerBenchReport {
         agent: a.agent,
         maze: layout.name.clone(),
@@ -340,6 +414,11 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         plain: plain_fig,
         speedup: median(ratios),
         matmul_gflops: gflops,
+        manager_decisions_per_env_step: matches!(a.agent, BenchAgent::Fn | BenchAgent::Wn)
+            .then_some(decisions_per_step),
+        pytorch,
+        fast_over_pytorch,
+        pytorch_note,
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -347,6 +426,199 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         print_table(&report);
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// The repository this binary was built from (where the PyTorch script
+/// and the project's virtual environment are).
+fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The Python to run the PyTorch reference with: `WORLDGRAPH_PYTHON`, else
+/// the repository's `.venv/bin/python` when it exists, else `python3`.
+fn reference_python() -> PathBuf {
+    if let Some(p) = std::env::var_os("WORLDGRAPH_PYTHON").filter(|p| !p.is_empty()) {
+        return PathBuf::from(p);
+    }
+    let venv = repo_root().join(".venv/bin/python");
+    if venv.exists() {
+        venv
+    } else {
+        PathBuf::from("python3")
+    }
+}
+
+/// Runs `cmd` to completion, killing it after `limit`: `(success, stdout,
+/// stderr)`, or why it could not run.
+fn run_with_limit(cmd: &mut Command, limit: Duration) -> Result<(bool, String, String), String> {
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    // Drain both pipes on threads so a chatty child cannot block on a full
+    // pipe while we wait.
+    let drain = |pipe: Option<Box<dyn std::io::Read + Send>>| {
+        std::thread::spawn(move || {
+            use std::io::Read;
+            let mut text = String::new();
+            if let Some(mut p) = pipe {
+                let _ = p.read_to_string(&mut text);
+            }
+            text
+        })
+    };
+    let out = drain(child.stdout.take().map(|p| Box::new(p) as _));
+    let err = drain(child.stderr.take().map(|p| Box::new(p) as _));
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
+            break Some(status);
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let (out, err) = (
+        out.join().unwrap_or_default(),
+        err.join().unwrap_or_default(),
+    );
+    match status {
+        Some(s) => Ok((s.success(), out, err)),
+        None => Err(format!("killed after {} s", limit.as_secs())),
+    }
+}
+
+/// The last few lines of a child's stderr, for a note.
+fn tail(text: &str) -> String {
+    let lines: Vec<&str> = text.trim().lines().collect();
+    lines[lines.len().saturating_sub(3)..].join(" | ")
+}
+
+/// Runs the PyTorch reference (`benches/learner_pytorch.py`) as
+/// `--pytorch` asks: its figures, or `None` and a note saying why not (an
+/// error under `--pytorch required`). For WN it gets the Rust agent's
+/// window side and, as its Manager horizon, one over the Rust agent's
+/// measured decisions per env step (the reference does not traverse, and
+/// traversal steps lengthen the Rust agent's intervals), so both Managers
+/// do about the same work per env step.
+fn pytorch_reference(
+    a: &BenchLearnerArgs,
+    rollout: usize,
+    window_side: Option<usize>,
+    horizon: Option<usize>,
+) -> anyhow::Result<(Option<PytorchFigures>, Option<String>)> {
+    let agent = match a.agent {
+        BenchAgent::Gcp => "gcp",
+        BenchAgent::A2c => "a2c",
+        BenchAgent::Wn => "wn",
+        BenchAgent::Fn => "",
+    };
+    let skip = |note: String| -> anyhow::Result<(Option<PytorchFigures>, Option<String>)> {
+        anyhow::ensure!(
+            a.pytorch != PytorchMode::Required,
+            "--pytorch required: {note}"
+        );
+        Ok((None, Some(note)))
+    };
+    if a.pytorch == PytorchMode::Off {
+        return Ok((None, Some("PyTorch reference off (--pytorch off)".into())));
+    }
+    if agent.is_empty() {
+        return skip("the PyTorch reference implements gcp, a2c and wn, not fn".into());
+    }
+    if a.world.layout.is_some() || a.world.max_steps.is_some() || a.world.balls.is_some() {
+        return skip(
+            "the PyTorch reference runs the embedded mazes with their default episodes only \
+             (no --layout, --max-steps, --balls)"
+                .into(),
+        );
+    }
+    if a.world.task != sim::Task::MultiGoal {
+        return skip("the PyTorch reference runs the MultiGoal task only".into());
+    }
+    let python = reference_python();
+    let shown = python.display().to_string();
+    let install = "install it with `make bench-learner-python` (torch from PyPI into .venv)";
+    let probe = run_with_limit(
+        Command::new(&python).args(["-c", "import torch, worldgraph; print(torch.__version__)"]),
+        Duration::from_secs(120),
+    );
+    match probe {
+        Ok((true, _, _)) => {}
+        Ok((false, _, err)) => {
+            return skip(format!(
+                "no PyTorch reference: `import torch, worldgraph` fails under {shown} ({}); {install}",
+                tail(&err)
+            ));
+        }
+        Err(e) => {
+            return skip(format!(
+                "no PyTorch reference: cannot run {shown} ({e}); {install}"
+            ));
+        }
+    }
+    let script = repo_root().join("benches/learner_pytorch.py");
+    let mut cmd = Command::new(&python);
+    cmd.arg(&script)
+        .args(["--agent", agent, "--maze"])
+        .arg(a.world.maze.to_string())
+        .args(["--envs", &a.envs.to_string()])
+        .args(["--rollout", &rollout.to_string()])
+        .args(["--threads", &a.threads.to_string()])
+        .args(["--seconds", &a.seconds.to_string()])
+        .args(["--seed", &a.world.seed.to_string()]);
+    if let Some(side) = window_side {
+        cmd.args(["--window", &side.to_string()]);
+    }
+    if let Some(h) = horizon {
+        cmd.args(["--horizon", &h.to_string()]);
+    }
+    // Its own start-up, warm-up and windows: generous, but bounded.
+    let limit = Duration::from_secs_f64(a.seconds * 4.0 + 300.0);
+    let (ok, out, err) = match run_with_limit(&mut cmd, limit) {
+        Ok(r) => r,
+        Err(e) => return skip(format!("the PyTorch reference did not finish: {e}")),
+    };
+    if !ok {
+        return skip(format!(
+            "the PyTorch reference failed under {shown}: {}",
+            tail(&err)
+        ));
+    }
+    let report: serde_json::Value = match out
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .map(serde_json::from_str)
+    {
+        Some(Ok(v)) => v,
+        _ => {
+            return skip(format!(
+                "the PyTorch reference printed no JSON line: {}",
+                tail(&out)
+            ));
+        }
+    };
+    let Some(rate) = report["env_steps_per_sec"].as_f64().filter(|r| *r > 0.0) else {
+        return skip(format!("the PyTorch reference reported no rate: {report}"));
+    };
+    let text = |k: &str| report[k].as_str().unwrap_or_default().to_string();
+    Ok((
+        Some(PytorchFigures {
+            env_steps_per_sec: rate,
+            variant: text("variant"),
+            torch_version: text("torch_version"),
+            env_share: report["env_share"].as_f64().unwrap_or(f64::NAN),
+            python: shown,
+            report,
+        }),
+        None,
+    ))
 }
 
 fn print_table(r: &LearnerBenchReport) {
@@ -391,4 +663,31 @@ fn print_table(r: &LearnerBenchReport) {
         r.matmul_gflops,
         100.0 * r.share_of_bound
     );
+    if let Some(d) = r.manager_decisions_per_env_step {
+        let reference = r
+            .pytorch
+            .as_ref()
+            .and_then(|p| p.report["manager_decisions_per_env_step"].as_f64())
+            .map(|p| format!(", PyTorch reference {p:.4}"))
+            .unwrap_or_default();
+        println!("Manager decisions per env step: fast path {d:.4}{reference}");
+    }
+    match (&r.pytorch, r.fast_over_pytorch) {
+        (Some(p), Some(ratio)) => {
+            println!(
+                "{:<8} {:>14.0} {:>8.1}%   (torch {}, {}, run after the Rust windows)",
+                "pytorch",
+                p.env_steps_per_sec,
+                100.0 * p.env_share,
+                p.torch_version,
+                p.variant
+            );
+            println!("fast/pytorch {ratio:.2}×");
+        }
+        _ => {
+            if let Some(note) = &r.pytorch_note {
+                println!("note: {note}");
+            }
+        }
+    }
 }
