@@ -24,8 +24,9 @@ pub struct DemoArgs {
     /// Rounds of world graph discovery.
     #[arg(long, default_value_t = 10)]
     pub rounds: u32,
-    /// Env-step budget of each stage 2 agent (the default is about where
-    /// Wide-then-Narrow's test episodes reach the exit; see docs/experiments.md).
+    /// Env-step budget of each stage 2 agent (the default keeps the demo
+    /// near five minutes on 2 cores; Wide-then-Narrow's test episodes reach
+    /// the exit only at larger budgets, see docs/experiments.md).
     #[arg(long, default_value_t = 1_000_000)]
     pub env_steps: u64,
 }
