@@ -181,15 +181,15 @@ enum Learner {
 }
 
 impl Learner {
-    /// One training iteration; returns the Manager's decisions in it (its
-    /// intervals that ended; 0 without a Manager).
+    /// One training iteration; returns the Manager's decisions in it (0
+    /// without a Manager).
     fn iterate(&mut self, env: &mut dyn BatchEnvironment) -> anyhow::Result<u64> {
         Ok(match self {
             Learner::Gcp(g) => {
                 g.train_iteration(env, None)?;
                 0
             }
-            Learner::Hrl(a) => a.train_iteration(env)?.intervals as u64,
+            Learner::Hrl(a) => a.train_iteration(env)?.decisions as u64,
         })
     }
     /// The narrow window's side (WN).
