@@ -15,8 +15,8 @@ What it implements, per agent (sizes of ``AgentConfig::default()`` and
 - the actor-critic of ``learner/src/a2c/net.rs``: dense one-hot planes
   ``[N, C, H, W]`` (``input.rs``: 9 object kinds, 4 agent facings, the
   carried key, then the goal planes) → 3×3 conv (16, stride 1, pad 1) →
-  ReLU → 3×3 conv (32, stride 2, pad 1) → ReLU → flatten → linear (64) →
-  ReLU → LSTM cell (64) → policy (3 actions) and value heads;
+  ReLU → 3×3 conv (32, stride 2, pad 1) → ReLU → flatten → linear (``--hidden``,
+  128) → ReLU → LSTM cell (``--hidden``) → policy (3 actions) and value heads;
 - the A2C update of ``a2c/mod.rs`` and ``a2c/rollout.rs``: GAE (λ 0.95),
   ``L = L_π + 0.5 L_V − 0.01 H``, Adam, global gradient-norm clip 0.5, the
   LSTM state carried across rollouts (truncated BPTT over the rollout) and
@@ -401,7 +401,7 @@ class A2cDriver:
     def __init__(self, env, args, path, rng, channels_last):
         self.env = env
         self.planes = Planes(env.h, env.w, 0, channels_last)
-        net = ActorCritic(self.planes.c, (16, 32), 64, 3, env.h, env.w)
+        net = ActorCritic(self.planes.c, (16, 32), args.hidden, 3, env.h, env.w)
         if channels_last:
             net = net.to(memory_format=torch.channels_last)
         self.learner = EveryStep(net, self.planes, env.n, args.rollout, path, 0.99, 0.95, 7e-4, args.fused_adam)
@@ -437,7 +437,7 @@ class GcpDriver:
     def __init__(self, env, args, path, rng, channels_last):
         self.env, self.rng = env, rng
         self.planes = Planes(env.h, env.w, 1, channels_last)
-        net = ActorCritic(self.planes.c, (16, 32), 64, 3, env.h, env.w)
+        net = ActorCritic(self.planes.c, (16, 32), args.hidden, 3, env.h, env.w)
         if channels_last:
             net = net.to(memory_format=torch.channels_last)
         self.learner = EveryStep(net, self.planes, env.n, args.rollout, path, 0.95, 0.95, 1e-3, args.fused_adam)
@@ -514,16 +514,27 @@ def window_cells(side, centres, wall, width, height):
 class Manager(nn.Module):
     """The Wide-then-Narrow Manager (``hrl/feudal.rs``, ``wide_narrow.rs``)."""
 
-    def __init__(self, height, width, candidates, window_len) -> None:
+    def __init__(self, height, width, candidates, window_len, hidden, cand_cells) -> None:
         super().__init__()
-        hidden = 64
         self.trunk = Trunk(BASE_CHANNELS, (16, 32), hidden, height, width)
         self.value = nn.Linear(hidden, 1)
-        self.wide = nn.Linear(hidden, candidates)
+        self.wide_h = nn.Linear(hidden, candidates)
+        # The goal map (``feudal::GoalMap``): conv 3×3 (8) → ReLU → conv 3×3
+        # (1), its last layer zero, read at the candidates' cells.
+        self.map1 = nn.Conv2d(BASE_CHANNELS, 8, 3, padding=1)
+        self.map2 = nn.Conv2d(8, 1, 3, padding=1)
+        nn.init.zeros_(self.map2.weight)
+        nn.init.zeros_(self.map2.bias)
+        self.register_buffer("cand_cells", torch.as_tensor(cand_cells, dtype=torch.int64))
         local = window_len * WINDOW_CHANNELS
         self.narrow_hidden = nn.Linear(hidden + local + candidates, hidden)
         self.narrow_out = nn.Linear(hidden, window_len)
         self.candidates = candidates
+
+    def wide(self, h, x):
+        """``π^ω`` logits: the core's, plus the goal map's at the candidates."""
+        bias = self.map2(F.relu(self.map1(x))).flatten(1).index_select(1, self.cand_cells)
+        return self.wide_h(h) + bias
 
     def narrow(self, h, wide, local, valid):
         which = F.one_hot(wide, self.candidates).to(h.dtype)
@@ -539,12 +550,12 @@ class WnDriver:
         n, h, w = env.n, env.h, env.w
         self.planes = Planes(h, w, 2, channels_last)
         self.mplanes = Planes(h, w, 0, channels_last)
-        net = ActorCritic(self.planes.c, (16, 32), 64, 3, h, w)
+        net = ActorCritic(self.planes.c, (16, 32), args.hidden, 3, h, w)
         self.cands = env.free[rng.choice(len(env.free), size=min(BENCH_CANDIDATES, len(env.free)), replace=False)]
         side = args.window or covering_side(7 if w > 25 else 5, self.cands, env.wall, w, h)
         self.side = side
         self.win_cells, self.win_valid = window_cells(side, self.cands, env.wall, w, h)
-        self.manager = Manager(h, w, len(self.cands), side * side)
+        self.manager = Manager(h, w, len(self.cands), side * side, args.hidden, self.cands)
         if channels_last:
             net = net.to(memory_format=torch.channels_last)
             self.manager = self.manager.to(memory_format=torch.channels_last)
@@ -584,7 +595,7 @@ class WnDriver:
             state = (self.mstate[0][sel] * keep, self.mstate[1][sel] * keep)
             h, c = self.manager.trunk.step(x, state)
             values = self.manager.value(h).squeeze(-1).numpy()
-            wide = torch.multinomial(torch.softmax(self.manager.wide(h), -1), 1).squeeze(1)
+            wide = torch.multinomial(torch.softmax(self.manager.wide(h, x), -1), 1).squeeze(1)
             wide_np = wide.numpy()
             cells = self.win_cells[wide_np]
             valid = self.win_valid[wide_np].copy()
@@ -686,7 +697,7 @@ class WnDriver:
         hh = torch.cat(hs, 0)
         value = m.value(hh).squeeze(-1)
         wide_t = torch.from_numpy(wide.reshape(-1))
-        lw = F.log_softmax(m.wide(hh), -1)
+        lw = F.log_softmax(m.wide(hh, x), -1)
         ln_ = F.log_softmax(
             m.narrow(hh, wide_t, torch.from_numpy(local.reshape(n, -1)), torch.from_numpy(valid.reshape(n, -1))), -1
         )
@@ -812,6 +823,7 @@ def main(argv=None) -> int:
         default=True,
         help="torch.optim.Adam(fused=True) (default on; off: foreach)",
     )
+    p.add_argument("--hidden", type=int, default=128, help="width of the encoder output and the LSTM (default 128)")
     p.add_argument("--window", type=int, default=0, help="WN narrow window side (0: covering side, as the Rust agent)")
     p.add_argument(
         "--horizon", type=int, default=0, help="WN Manager horizon c in Worker steps (0: a third of the rollout, as Rust)"
@@ -916,8 +928,8 @@ def main(argv=None) -> int:
 
 def implements(args, d) -> str:
     base = (
-        f"dense one-hot planes [N,{d.planes.c},H,W] -> conv3x3(16,s1)-relu-conv3x3(32,s2)-relu-linear(64)-relu "
-        "-> LSTMCell(64) -> policy(3)+value; A2C with GAE(0.95), value 0.5, entropy 0.01, Adam, clip 0.5, "
+        f"dense one-hot planes [N,{d.planes.c},H,W] -> conv3x3(16,s1)-relu-conv3x3(32,s2)-relu-linear({args.hidden})-relu "
+        f"-> LSTMCell({args.hidden}) -> policy(3)+value; A2C with GAE(0.95), value 0.5, entropy 0.01, Adam, clip 0.5, "
         "truncated BPTT over the rollout"
     )
     if args.agent == "a2c":
@@ -927,7 +939,8 @@ def implements(args, d) -> str:
     return (
         "WN Worker (2 goal planes, gamma 0.99, lr 7e-4): "
         + base
-        + f"; Manager: own trunk, value, wide head over {len(d.cands)} random candidates, "
+        + f"; Manager: own trunk, value, wide head over {len(d.cands)} random candidates plus a goal map "
+        "(conv3x3(8)-relu-conv3x3(1) at their cells), "
         f"narrow head over a {d.side}x{d.side} window, A2C over its decisions; no traversal"
     )
 

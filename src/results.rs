@@ -136,7 +136,20 @@ pub fn discover_path(root: &Path, maze: &str, seed: u64) -> PathBuf {
 /// Reads one run summary.
 pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let r: RunResult = serde_json::from_slice(&bytes)
+    let mut v: serde_json::Value = serde_json::from_slice(&bytes)
+        .with_context(|| format!("{} is not a run summary", path.display()))?;
+    // A summary written before the Manager's goal map existed ran without
+    // one: its recorded agent settings say so, not today's default.
+    if let Some(agent) = v
+        .get_mut("train_config")
+        .and_then(|t| t.get_mut("agent"))
+        .and_then(|a| a.as_object_mut())
+    {
+        agent
+            .entry("goal_map")
+            .or_insert(serde_json::Value::Bool(false));
+    }
+    let r: RunResult = serde_json::from_value(v)
         .with_context(|| format!("{} is not a run summary", path.display()))?;
     anyhow::ensure!(
         r.schema == RESULT_SCHEMA,

@@ -63,19 +63,25 @@ pub struct UpdateRow {
     /// Share of the Manager's decisions during the update whose narrow goal
     /// `g_n` is the exit (0 for A2C).
     pub exit_goal_share: f64,
+    /// Share of the Manager's decisions during the update whose narrow goal
+    /// `g_n` holds a ball when it is named (0 for A2C): how often the
+    /// Manager points the Worker at the task's rewards.
+    pub ball_goal_share: f64,
 }
 
 /// The CSV header, the fields of [`UpdateRow`] in order.
-pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share";
+pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share,ball_goal_share";
 /// Fields of a row written before the exit columns (read on resume).
 const OLD_FIELDS: usize = 15;
+/// Fields of a row written before the ball column (read on resume).
+const EXIT_FIELDS: usize = 17;
 
 impl UpdateRow {
     fn csv_line(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6}",
+            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6},{:.6}",
             self.update,
             self.env_steps,
             self.wall_seconds,
@@ -92,18 +98,20 @@ impl UpdateRow {
             self.traversal_share,
             self.sps,
             self.exit_share,
-            self.exit_goal_share
+            self.exit_goal_share,
+            self.ball_goal_share
         );
         s
     }
 
     /// Parses one CSV line; `None` for a malformed one (a line a killed
     /// process left half written). A row of an earlier version, without the
-    /// exit columns, reads with them `NaN`.
+    /// exit or ball columns, reads with them `NaN`.
     fn parse(line: &str) -> Option<UpdateRow> {
         let f: Vec<&str> = line.trim_end().split(',').collect();
         let old = f.len() == OLD_FIELDS;
-        if f.len() != HEADER.split(',').count() && !old {
+        let no_ball = old || f.len() == EXIT_FIELDS;
+        if f.len() != HEADER.split(',').count() && !no_ball {
             return None;
         }
         let x = |i: usize| f[i].parse::<f64>().ok();
@@ -126,6 +134,7 @@ impl UpdateRow {
             sps: x(14)?,
             exit_share: if old { f64::NAN } else { x(15)? },
             exit_goal_share: if old { f64::NAN } else { x(16)? },
+            ball_goal_share: if no_ball { f64::NAN } else { x(17)? },
         })
     }
 
@@ -150,6 +159,7 @@ impl UpdateRow {
                 ("hrl/goals_reached", self.goals_reached),
                 ("hrl/traversal_share", self.traversal_share),
                 ("hrl/exit_goal_share", self.exit_goal_share),
+                ("hrl/ball_goal_share", self.ball_goal_share),
             ]);
         }
         v
@@ -273,14 +283,20 @@ mod tests {
         let r = UpdateRow {
             exit_share: 0.125,
             exit_goal_share: 0.5,
+            ball_goal_share: 0.25,
             ..row(4)
         };
         assert_eq!(UpdateRow::parse(&r.csv_line()), Some(r));
+        // The 17 fields of the version before the ball column.
+        let exit = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5";
+        let e = UpdateRow::parse(exit).expect("a row without the ball column reads");
+        assert_eq!((e.exit_share, e.exit_goal_share), (0.125, 0.5));
+        assert!(e.ball_goal_share.is_nan());
         // The 15 fields an earlier version wrote, then a half-written line.
         let old = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0";
         let o = UpdateRow::parse(old).expect("an earlier row reads");
         assert_eq!((o.update, o.env_steps, o.intervals), (4, 7680, 7));
-        assert!(o.exit_share.is_nan() && o.exit_goal_share.is_nan());
+        assert!(o.exit_share.is_nan() && o.exit_goal_share.is_nan() && o.ball_goal_share.is_nan());
         assert_eq!(UpdateRow::parse("4,7680,1.000,1,0.5"), None);
     }
 

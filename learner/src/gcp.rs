@@ -119,7 +119,7 @@ impl Default for GcpConfig {
             // better (docs/implementation_details.md, "Earlier passes").
             record_missed_legs: true,
             conv_channels: [16, 32],
-            hidden: 64,
+            hidden: 128,
         }
     }
 }

@@ -571,7 +571,9 @@ fn pytorch_reference(
         .args(["--rollout", &rollout.to_string()])
         .args(["--threads", &a.threads.to_string()])
         .args(["--seconds", &a.seconds.to_string()])
-        .args(["--seed", &a.world.seed.to_string()]);
+        .args(["--seed", &a.world.seed.to_string()])
+        // π_g, the baseline and the Worker share one width by default.
+        .args(["--hidden", &AgentConfig::default().hidden.to_string()]);
     if let Some(side) = window_side {
         cmd.args(["--window", &side.to_string()]);
     }

@@ -1074,6 +1074,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                         f64::NAN
                     },
                     exit_goal_share: s.exit_goal_share,
+                    ball_goal_share: s.ball_goal_share,
                 })?;
             }
             bar.inc(1);

@@ -105,13 +105,75 @@ pub struct DecisionQueue {
     pub decisions: Vec<Decision>,
 }
 
-/// The Manager: a trunk without goal channel, a value head and a goal head.
+/// The Manager's goal map: its subgoal encoder, a small fully convolutional
+/// network from the observation planes to one logit per cell, added to the
+/// goal head's logits (the paper's Manager emits "a masked probability
+/// heatmask, assigning probability to valid goal states", and its "subgoal
+/// encoder ... uses very similar CNN encoding with fewer channels";
+/// section 4.1 and its comments). A cell's logit sees the `5×5` cells
+/// around it, so "name the cell beside a ball" is a local pattern, learnt
+/// from every decision, where the goal head's linear layer over the core
+/// output must learn each ball-to-goal mapping separately. The last layer
+/// starts at zero: an untrained map leaves the head's distribution as it
+/// is.
+#[derive(Debug)]
+pub struct GoalMap {
+    conv1: nn::Conv2D,
+    conv2: nn::Conv2D,
+    /// WN: the cells of `V`, whose logits `π^ω` reads; FN: every cell.
+    cells: Option<Tensor>,
+}
+
+impl GoalMap {
+    /// A map under `p` over `in_channels` planes with `channels` hidden
+    /// channels; `cells`: the cells whose logits the head reads (`None`:
+    /// all, in cell order).
+    pub fn new(p: &nn::Path, in_channels: i64, channels: i64, cells: Option<&[u32]>) -> GoalMap {
+        let same = nn::ConvConfig {
+            padding: 1,
+            ..Default::default()
+        };
+        let zero = nn::ConvConfig {
+            padding: 1,
+            ws_init: nn::Init::Const(0.0),
+            bs_init: nn::Init::Const(0.0),
+            ..Default::default()
+        };
+        GoalMap {
+            conv1: nn::conv2d(p / "conv1", in_channels, channels, 3, same),
+            conv2: nn::conv2d(p / "conv2", channels, 1, 3, zero),
+            cells: cells.map(|c| Tensor::from_slice(&c.iter().map(|&x| i64::from(x)).collect::<Vec<_>>())),
+        }
+    }
+
+    /// The logits `[N, cells]` of the observations `input`.
+    pub fn logits(&self, input: &CellInput) -> Tensor {
+        self.logits_dense(&input.to_dense())
+    }
+
+    /// The logits `[N, cells]` of dense one-hot planes `[N, C, H, W]`.
+    pub fn logits_dense(&self, planes: &Tensor) -> Tensor {
+        let map = planes
+            .apply(&self.conv1)
+            .relu()
+            .apply(&self.conv2)
+            .flatten(1, -1);
+        match &self.cells {
+            Some(c) => map.index_select(1, c),
+            None => map,
+        }
+    }
+}
+
+/// The Manager: a trunk without goal channel, a value head, a goal head
+/// and, optionally, a [`GoalMap`].
 #[derive(Debug)]
 pub struct Manager {
     trunk: Trunk,
     value: nn::Linear,
     head: ManagerHead,
     hidden: i64,
+    goal_map: Option<GoalMap>,
 }
 
 impl Manager {
@@ -129,7 +191,23 @@ impl Manager {
             value,
             head,
             hidden,
+            goal_map: None,
         }
+    }
+
+    /// The Manager with a goal map under `p / "goal_map"` (the cells of `V`
+    /// for WN, every cell for FN); created after the rest, so the other
+    /// weights are those of a Manager without one.
+    pub fn with_goal_map(mut self, p: &nn::Path, channels: i64, cells: Option<&[u32]>) -> Manager {
+        let planes = self.trunk.in_channels();
+        self.goal_map = Some(GoalMap::new(&(p / "goal_map"), planes, channels, cells));
+        self
+    }
+
+    /// The goal map's logits `[N, goals]` of `input` (`None` without a
+    /// map), with gradient unless under `no_grad`.
+    pub fn goal_bias(&self, input: &CellInput) -> Option<Tensor> {
+        self.goal_map.as_ref().map(|m| m.logits(input))
     }
 
     /// The FN head over a `width × height` grid with `valid` subgoal cells.
@@ -179,13 +257,19 @@ impl Manager {
         self.act(&input, &state.select(&idx)).1
     }
 
-    /// FN: the subgoal distribution of core outputs `h`.
-    pub fn feudal_policy(&self, h: &Tensor) -> Option<Categorical> {
+    /// FN: the subgoal distribution of core outputs `h`, plus the goal
+    /// map's logits `bias` (`[N, H·W]`) if the Manager has one.
+    pub fn feudal_policy(&self, h: &Tensor, bias: Option<&Tensor>) -> Option<Categorical> {
         match &self.head {
             ManagerHead::Feudal { cells, valid } => {
                 let n = h.size()[0];
                 let mask = valid.view([1, -1]).expand([n, -1], false);
-                Some(Categorical::new(&cells.forward(h), Some(&mask)))
+                let logits = cells.forward(h);
+                let logits = match bias {
+                    Some(b) => logits + b,
+                    None => logits,
+                };
+                Some(Categorical::new(&logits, Some(&mask)))
             }
             ManagerHead::WideNarrow(_) => None,
         }
@@ -273,13 +357,15 @@ impl Manager {
                 .unroll_states(&features, init, &Tensor::from_slice(&reset).view([k, bb]));
         let h = hs.view([k * bb, self.hidden]);
         let value = self.value.forward(&h).squeeze_dim(-1);
+        let bias = self.goal_bias(&input);
         let (log_prob, entropy) = match &self.head {
             ManagerHead::Feudal { .. } => {
-                let pi = self.feudal_policy(&h).expect("feudal head");
+                let pi = self.feudal_policy(&h, bias.as_ref()).expect("feudal head");
                 (pi.log_prob(&Tensor::from_slice(&wide)), pi.entropy())
             }
             ManagerHead::WideNarrow(head) => head.terms(
                 &h,
+                bias.as_ref(),
                 &Tensor::from_slice(&local).view([k * bb, -1]),
                 &Tensor::from_slice(&valid).view([k * bb, -1]),
                 &Tensor::from_slice(&wide),
@@ -327,6 +413,59 @@ fn template_grid(input: &CellInput) -> (usize, usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::a2c::input::BASE_CHANNELS;
+    use tch::nn::OptimizerConfig;
+    use tch::{Device, Kind};
+
+    /// Planes of a `w × h` grid of floor with a ball at `(x, y)`.
+    fn ball_at(w: i64, h: i64, x: i64, y: i64) -> Tensor {
+        let planes = Tensor::zeros([1, BASE_CHANNELS as i64, h, w], (Kind::Float, Device::Cpu));
+        let _ = planes.get(0).get(sim::Object::Floor as i64).fill_(1.0);
+        let _ = planes.get(0).get(sim::Object::Floor as i64).get(y).get(x).fill_(0.0);
+        let _ = planes.get(0).get(sim::Object::Ball as i64).get(y).get(x).fill_(1.0);
+        planes
+    }
+
+    #[test]
+    fn an_untrained_goal_map_leaves_the_goal_head_as_it_is() {
+        let vs = nn::VarStore::new(Device::Cpu);
+        let map = crate::seeding::init_seeded(1, || {
+            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, Some(&[3, 10, 24]))
+        });
+        let logits = map.logits_dense(&ball_at(7, 7, 3, 3));
+        assert_eq!(logits.size(), [1, 3]);
+        assert_eq!(logits.abs().max().double_value(&[]), 0.0);
+    }
+
+    /// What makes the map the Manager's lever: being paid for naming the
+    /// ball's cell with the ball in one place teaches it to name the ball's
+    /// cell wherever the ball lies, which a head over the core's output
+    /// has to learn place by place.
+    #[test]
+    fn naming_a_ball_learnt_in_one_place_transfers_to_another() {
+        let (w, h) = (9, 9);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let map = crate::seeding::init_seeded(3, || {
+            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
+        });
+        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        let cell = |x: i64, y: i64| y * w + x;
+        for _ in 0..60 {
+            let logp = map.logits_dense(&ball_at(w, h, 2, 2)).log_softmax(-1, Kind::Float);
+            opt.backward_step(&(-logp.get(0).get(cell(2, 2))));
+        }
+        let p = map
+            .logits_dense(&ball_at(w, h, 6, 5))
+            .softmax(-1, Kind::Float)
+            .get(0)
+            .get(cell(6, 5))
+            .double_value(&[]);
+        assert!(
+            p > 10.0 / (w * h) as f64,
+            "the ball's cell elsewhere has probability {p}, uniform {}",
+            1.0 / (w * h) as f64
+        );
+    }
 
     #[test]
     fn interval_returns_equal_the_closed_form() {

@@ -139,6 +139,9 @@ pub struct AgentConfig {
     pub fine_tune_pi_g: bool,
     /// What a hand-over to a traversal pays the Worker.
     pub hand_over: HandOver,
+    /// The Manager's goal map ([`feudal::GoalMap`]): a fully convolutional
+    /// logit per cell added to its goal head's (FN, WN).
+    pub goal_map: bool,
 }
 
 impl Default for AgentConfig {
@@ -153,13 +156,14 @@ impl Default for AgentConfig {
             horizon: 0,
             window: 0,
             conv_channels: [16, 32],
-            hidden: 64,
+            hidden: 128,
             worker: A2cConfig::default(),
             manager: A2cConfig::default(),
             goal_reward: 1.0,
             step_penalty: -0.01,
             fine_tune_pi_g: true,
             hand_over: HandOver::default(),
+            goal_map: true,
         }
     }
 }
@@ -352,6 +356,8 @@ pub struct IterationStats {
     pub decisions: usize,
     /// Share of those whose narrow goal `g_n` is the exit.
     pub exit_goal_share: f64,
+    /// Share of those whose narrow goal `g_n` held a ball when named.
+    pub ball_goal_share: f64,
 }
 
 /// The result of an evaluation: one episode per environment.
@@ -519,6 +525,12 @@ impl HrlAgent {
                     )),
                     _ => Manager::feudal_head(p, hidden, &valid_cells),
                 });
+                let m = if cfg.goal_map {
+                    let cells = (cfg.kind == AgentKind::WideNarrow).then_some(&candidates[..]);
+                    m.with_goal_map(&vs.root(), (cfg.conv_channels[0] / 2).max(1), cells)
+                } else {
+                    m
+                };
                 (Some(vs), Some(m))
             } else {
                 (None, None)
@@ -879,6 +891,7 @@ impl HrlAgent {
             .select(&idx)
             .reset_done(&mask(&resets));
         let (next, values, h) = manager.act(&input, &state);
+        let bias = tch::no_grad(|| manager.goal_bias(&input));
         ctl.manager_state
             .as_mut()
             .expect("state")
@@ -887,7 +900,7 @@ impl HrlAgent {
         let mut picks: Vec<Pick> = Vec::with_capacity(who.len());
         match manager.head() {
             ManagerHead::Feudal { .. } => {
-                let pi = manager.feudal_policy(&h).expect("feudal");
+                let pi = manager.feudal_policy(&h, bias.as_ref()).expect("feudal");
                 for cell in crate::seeding::sample_index(&mut ctl.rng, &pi.probs()) {
                     picks.push((
                         cell as i64,
@@ -901,7 +914,7 @@ impl HrlAgent {
             }
             ManagerHead::WideNarrow(head) => {
                 let window = self.window.as_ref().expect("WN has a window");
-                let wide = crate::seeding::sample_index(&mut ctl.rng, &head.wide(&h).probs());
+                let wide = crate::seeding::sample_index(&mut ctl.rng, &head.wide(&h, bias.as_ref()).probs());
                 let mut locals = Vec::new();
                 let mut valids = Vec::new();
                 for (j, &e) in who.iter().enumerate() {
@@ -972,8 +985,9 @@ impl HrlAgent {
             c.manager_reset = false;
             c.goal = WorkerGoal::new(gw, gn, obs.meta[e].cell(self.width) as u32);
             made.count += 1;
-            made.exit_goals +=
-                usize::from(obs.env_cells(e).get(gn as usize) == Some(&(sim::Object::Exit as u8)));
+            let named = obs.env_cells(e).get(gn as usize).copied();
+            made.exit_goals += usize::from(named == Some(sim::Object::Exit as u8));
+            made.ball_goals += usize::from(named == Some(sim::Object::Ball as u8));
         }
         // A fresh goal episode for the Worker.
         let fresh: Vec<bool> = (0..ctl.envs.len()).map(|e| who.contains(&e)).collect();
@@ -1386,6 +1400,7 @@ impl HrlAgent {
             exit_share: counts.successes as f64 / counts.episodes.max(1) as f64,
             decisions: counts.decisions,
             exit_goal_share: counts.exit_goals as f64 / counts.decisions.max(1) as f64,
+            ball_goal_share: counts.ball_goals as f64 / counts.decisions.max(1) as f64,
         })
     }
 
@@ -1615,12 +1630,14 @@ struct StepCounts {
     traversal_steps: u64,
     decisions: usize,
     exit_goals: usize,
+    ball_goals: usize,
 }
 
 impl StepCounts {
     fn add(&mut self, d: Decisions) {
         self.decisions += d.count;
         self.exit_goals += d.exit_goals;
+        self.ball_goals += d.ball_goals;
     }
 }
 
@@ -1630,6 +1647,8 @@ struct Decisions {
     count: usize,
     /// Decisions whose narrow goal `g_n` is an exit cell.
     exit_goals: usize,
+    /// Decisions whose narrow goal `g_n` holds a ball.
+    ball_goals: usize,
 }
 
 #[cfg(test)]

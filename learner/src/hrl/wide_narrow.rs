@@ -276,9 +276,15 @@ impl WideNarrowHead {
         }
     }
 
-    /// `π^ω(·|s_t)` of core outputs `h` `[N, hidden]`.
-    pub fn wide(&self, h: &Tensor) -> Categorical {
-        Categorical::new(&self.wide.forward(h), None)
+    /// `π^ω(·|s_t)` of core outputs `h` `[N, hidden]`, plus the Manager's
+    /// goal-map logits of the candidates `bias` (`[N, |V|]`) if it has a
+    /// map ([`crate::hrl::feudal::GoalMap`]).
+    pub fn wide(&self, h: &Tensor, bias: Option<&Tensor>) -> Categorical {
+        let logits = self.wide.forward(h);
+        match bias {
+            Some(b) => Categorical::new(&(logits + b), None),
+            None => Categorical::new(&logits, None),
+        }
     }
 
     /// `π^n(·|s_t, g_w, s_w)` of core outputs `h` `[N, hidden]`, the wide
@@ -303,12 +309,13 @@ impl WideNarrowHead {
     pub fn terms(
         &self,
         h: &Tensor,
+        bias: Option<&Tensor>,
         local: &Tensor,
         valid: &Tensor,
         wide: &Tensor,
         narrow: &Tensor,
     ) -> (Tensor, Tensor) {
-        let pw = self.wide(h);
+        let pw = self.wide(h, bias);
         let pn = self.narrow(h, wide, local, valid);
         (
             pw.log_prob(wide) + pn.log_prob(narrow),
@@ -536,6 +543,7 @@ mod tests {
         let valid = Tensor::from_slice(&[true, true, true, false]).view([1, 4]);
         let (logp, ent) = head.terms(
             &h,
+            None,
             &local,
             &valid,
             &Tensor::from_slice(&[2i64]),
