@@ -2,8 +2,12 @@
 //!
 //! Starts each role of the pipeline, runs the simulator's tools and the
 //! benchmarks. Shang et al. 2019 (arXiv:1907.00664) is implemented by the
-//! library crates; this binary only parses arguments (clap, low level),
-//! turns them into validated configs (high level) and calls them.
+//! library crates; this binary parses arguments (clap), turns them into
+//! validated configs and calls the libraries, and it also holds the run
+//! layer around them: the paper's training protocol and run directories
+//! (`commands/train.rs`, `commands/discover.rs`), the experiment grid and
+//! its results (`commands/experiment.rs`, `results.rs`), the pipeline's
+//! process roles (`roles/`) and the charts (`chart.rs`).
 
 use std::process::ExitCode;
 

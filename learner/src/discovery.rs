@@ -125,8 +125,7 @@ impl Default for DiscoveryConfig {
             latent_batch: 64,
             buffer: 4096,
             // π_g needs hundreds of A2C updates before it reaches goals
-            // (measured alone: ~500 on the small maze, ~700 on the medium);
-            // at 8 per round it never did within the loop's 6–11 rounds.
+            // (docs/implementation_details.md, "Where stage 1 departs").
             gcp_iters_per_round: 100,
             pivotal_ratio: 0.2,
             goal_curriculum: GoalCurriculum::default(),

@@ -20,7 +20,7 @@
 //!   ([`LatentModel::reconstruction_error`]), weighted so that a step's net
 //!   reward stays negative ([`GcpConfig::curiosity_coef`]).
 //! - **Learner.** A2C-LSTM ([`ActorCritic`] with the goal marked in an extra
-//!   input channel), GAE advantages ([`crate::gae`]), an entropy bonus,
+//!   input channel), GAE advantages ([`crate::a2c::advantages`]), an entropy bonus,
 //!   gradient-norm clipping and one Adam step per rollout.
 //! - **Trajectories.** The finished goal episodes' `(s_t, a_t)` sequences
 //!   are kept for the latent model ([`GoalConditionedPolicy::take_trajectories`]):
@@ -83,10 +83,9 @@ pub struct GcpConfig {
     /// error, in nats, capped at [`CURIOSITY_CAP_NATS`]). Keep
     /// `curiosity_coef · CURIOSITY_CAP_NATS` below `|step_penalty|`: every
     /// step then still costs, so curiosity steers *which way* `π_g` goes,
-    /// never *whether* it goes to its goal. With 0.02 (and no cap) the
-    /// bonus outgrew the penalty once the decoder's error rose, and the
-    /// policy that had reached 98 % of its goals learned to wander (22 %
-    /// within one round).
+    /// never *whether* it goes to its goal (a larger coefficient made a
+    /// trained `π_g` wander: `docs/implementation_details.md`, "Where stage
+    /// 1 departs from the paper").
     pub curiosity_coef: f64,
     /// Record for the latent model the goal episodes `π_g` missed as well
     /// (a chain's last leg when it timed out or the environment's episode

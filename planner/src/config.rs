@@ -84,7 +84,7 @@ pub struct PlannerConfig {
     /// The task whose rules the walks follow (balls are collected by
     /// stepping on them in the MultiGoal tasks and block the way in
     /// Door-Key). MultiGoal-Stochastic walks as MultiGoal: the graph is of
-    /// the static maze, its moving lava is left to `π_g` (paper section 3.4).
+    /// the static maze, its moving lava is left to `π_g` (paper section 4.3, "Execution").
     pub task: Task,
 }
 

@@ -1,6 +1,6 @@
 //! Visitation counts per cell, fed from the observation stream, so a user
 //! can see which parts of the maze the agents cover (issue 3; the paper's
-//! exploration argument, section 4.2, is about exactly this coverage).
+//! exploration argument, section 4.3, is about exactly this coverage).
 
 use std::path::Path;
 

@@ -2,7 +2,7 @@
 //!
 //! Implements the graph side of Shang et al. 2019, *Learning World Graphs to
 //! Accelerate Hierarchical Reinforcement Learning* (arXiv:1907.00664),
-//! section 3.3 ("Edge Connections") and section 4.2 ("Using World Graph
+//! section 3.3 ("Edge Connections") and section 4.3 ("Using World Graph
 //! Edges for Traversal"):
 //!
 //! 1. **Nodes** ([`pivotal`]): pivotal states `V_p`, or a comparison set —

@@ -60,7 +60,7 @@ pub fn v_rand(layout: &Layout, k: usize, seed: u64) -> Result<Vec<CellIdx>, Plan
     Ok(chosen)
 }
 
-/// `V_p`'s rule (section 3.2): the top `ratio` of `(cell, pivotality)`
+/// `V_p`'s rule (section 3.1): the top `ratio` of `(cell, pivotality)`
 /// pairs, at least one, most pivotal first, ties broken by the lower cell
 /// index. The learner ranks the visited cells by the mean of the latent
 /// model's Beta prior (`learner::vae`); [`nodes_from_cells`] turns the

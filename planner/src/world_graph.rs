@@ -6,7 +6,7 @@
 //!
 //! ## Routes
 //! A route from node `A` to node `B` is the chain of edges on a shortest
-//! path, each edge's recorded actions replayed in turn (paper section 4.2,
+//! path, each edge's recorded actions replayed in turn (paper section 4.3,
 //! "Execution": in deterministic worlds the agent follows the action
 //! sequences of the edge paths).
 //!

@@ -18,9 +18,9 @@
 //! Each round also measures the machine's **core-to-core round trip** (two
 //! threads on two CPUs passing one cache line back and forth): every batch
 //! crosses cores several times, so the pipeline's share of the in-process
-//! figure follows it. On a shared VM it is not constant (on the 2-vCPU
-//! machine of the closing notes it moved between ~110 and ~500 ns within
-//! minutes), which is why it is printed next to the ratio.
+//! figure follows it. On a shared VM it is not constant (it can move by a
+//! factor of several within minutes: docs/implementation_details.md,
+//! "Pipeline throughput"), which is why it is printed next to the ratio.
 
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};

@@ -102,10 +102,9 @@ pub struct PlannerServeArgs {
 /// [`COVERAGE_WINDOW`] of every `COVERAGE_PERIOD`. Every subscriber costs the
 /// sim work on each publish (delivery into its queue and, for a reader that
 /// lags as this one does by design, taking back the batch its full queue
-/// drops). Measured on 2 vCPUs (`bench pipeline`, 3 runs each, same
-/// minutes): 0.78–0.80 of in-process attached all the time, 0.80–0.81 in
-/// windows. The planner read ~1.5 % of the batches when attached all the
-/// time; in windows the coverage picture is a sample of the same stream.
+/// drops), so windows cost the sim less than a planner attached all the
+/// time (measured in `docs/implementation_details.md`, "Pipeline
+/// throughput"); the coverage picture is a sample of the same stream.
 pub const COVERAGE_PERIOD: Duration = Duration::from_secs(1);
 /// See [`COVERAGE_PERIOD`].
 pub const COVERAGE_WINDOW: Duration = Duration::from_millis(50);

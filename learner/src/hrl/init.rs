@@ -1,5 +1,5 @@
 //! Initialisation from the goal-conditioned policy `π_g` (Shang et al.
-//! 2019, section 4.4 / Control Experiments: "we test initializing the
+//! 2019, section 4.4; section 5, control experiments: "we test initializing the
 //! Manager and Worker with the weights of `π_g`").
 //!
 //! The Worker has `π_g`'s architecture (a goal channel, the same trunk), so

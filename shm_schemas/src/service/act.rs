@@ -197,8 +197,8 @@ impl<S: Service> ActSample<S> {
     }
     /// Starts loading the actions' cache lines, which the learner wrote on
     /// the other core, all at once: otherwise a step reaching each line
-    /// waits for it in turn (paired runs on 2 vCPUs: 0.3–2.8 % of the sim's
-    /// cycle saved, 8 of 8; docs/implementation_details.md).
+    /// waits for it in turn (measured in docs/implementation_details.md,
+    /// "Pipeline throughput").
     pub fn prefetch_actions(&self) {
         crate::raw::prefetch(self.actions());
     }
