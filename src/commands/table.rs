@@ -231,6 +231,19 @@ fn paper2(config: &str, maze: &str) -> String {
     }
 }
 
+/// The mean time to score (env steps, wall seconds) of the runs `rs` that
+/// reach `threshold`, or `None` if none does.
+fn mean_reach(rs: &[&RunResult], threshold: f64) -> Option<(f64, f64)> {
+    let reached: Vec<(u64, f64)> = rs.iter().filter_map(|r| first_reach(r, threshold)).collect();
+    (!reached.is_empty()).then(|| {
+        let n = reached.len() as f64;
+        (
+            reached.iter().map(|x| x.0 as f64).sum::<f64>() / n,
+            reached.iter().map(|x| x.1).sum::<f64>() / n,
+        )
+    })
+}
+
 /// Time to score of one run: the first validation point at or above
 /// `threshold` (env steps, wall seconds).
 fn first_reach(r: &RunResult, threshold: f64) -> Option<(u64, f64)> {
@@ -345,6 +358,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         runs[0].train_config.agent.envs, runs[0].train_config.agent.rollout_len
     );
 
+    let headline_at = md.len();
     // Table 1.
     let t1_tasks: Vec<&str> = TABLE1_TASKS
         .iter()
@@ -460,20 +474,22 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     }
     let _ = writeln!(md);
 
-    // Time to score.
+    // Time to score: the headline, put after the budgets.
+    let mut tts = String::new();
     let _ = writeln!(
-        md,
+        tts,
         "## Time to score\n\n\
          For each maze and task the threshold is {:.0} % of the best cell's mean (over its \
          seeds) of the runs' best validation scores; a seed's time to score is the env steps (and training wall \
          seconds) at its first validation at or above it. `k/n` seeds reached it; mean ± std are \
-         over those k. The figures plot the share of seeds that reached the threshold against env \
-         steps.\n",
+         over those k. The speed-up is the flat A2C's mean time over the configuration's, in env \
+         steps and in wall seconds (above 1: faster than A2C), where both reached the threshold. \
+         The figures plot the share of seeds that reached the threshold against env steps.\n",
         100.0 * a.threshold
     );
     let _ = writeln!(
-        md,
-        "| maze | task | threshold | configuration | reached | env steps | wall s |\n|---|---|---:|---|---:|---:|---:|"
+        tts,
+        "| maze | task | threshold | configuration | reached | env steps | wall s | speed-up over A2C (steps / wall) |\n|---|---|---:|---|---:|---:|---:|---:|"
     );
     let mut pairs: Vec<(String, String)> = cells
         .keys()
@@ -489,7 +505,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             .map(|(_, rs)| mean_std(&rs.iter().map(|r| r.best_validation).collect::<Vec<_>>()).0)
             .fold(f64::NEG_INFINITY, f64::max);
         if best <= 0.0 {
-            let _ = writeln!(md, "| {m} | {t} | — | every configuration | 0 | — | — |");
+            let _ = writeln!(tts, "| {m} | {t} | — | every configuration | 0 | — | — | — |");
             continue;
         }
         let threshold = a.threshold * best;
@@ -505,11 +521,26 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
                 .position(|x| x == c)
                 .unwrap_or(usize::MAX)
         });
+        // The flat A2C's mean time to the threshold, the reference row.
+        let a2c = here
+            .iter()
+            .find(|(c, _)| c.as_str() == "a2c")
+            .map(|(_, rs)| *rs);
+        let has_a2c = a2c.is_some();
+        let reference = a2c.and_then(|rs| mean_reach(rs, threshold));
         for (c, rs) in here {
             let reached: Vec<(u64, f64)> = rs
                 .iter()
                 .filter_map(|r| first_reach(r, threshold))
                 .collect();
+            let speed_up = match (c.as_str(), reference, mean_reach(rs, threshold)) {
+                ("a2c", Some(_), _) => "1 (reference)".to_string(),
+                (_, Some((a_steps, a_wall)), Some((steps, wall))) => {
+                    format!("{:.2}× / {:.2}×", a_steps / steps, a_wall / wall)
+                }
+                (_, None, Some(_)) if has_a2c => "A2C did not reach it".to_string(),
+                _ => "—".to_string(),
+            };
             let (steps, wall) = if reached.is_empty() {
                 ("—".to_string(), "—".to_string())
             } else {
@@ -518,8 +549,8 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
                 (format!("{sm:.0} ± {ss:.0}"), format!("{wm:.0} ± {ws:.0}"))
             };
             let _ = writeln!(
-                md,
-                "| {m} | {t} | {threshold:.3} | {} | {}/{} | {steps} | {wall} |",
+                tts,
+                "| {m} | {t} | {threshold:.3} | {} | {}/{} | {steps} | {wall} | {speed_up} |",
                 display_config(c),
                 reached.len(),
                 rs.len()
@@ -557,14 +588,15 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         .render(900, 520)
         .save_png(&figures.join(&file))?;
     }
-    let _ = writeln!(md);
+    let _ = writeln!(tts);
     for (m, t) in &pairs {
         let file = format!("time-to-score-{m}-{t}.png");
         if figures.join(&file).exists() {
-            let _ = writeln!(md, "![time to score, {m} {t}]({fig_link}/{file})");
+            let _ = writeln!(tts, "![time to score, {m} {t}]({fig_link}/{file})");
         }
     }
-    let _ = writeln!(md);
+    let _ = writeln!(tts);
+    md.insert_str(headline_at, &tts);
 
     // Figure 4.
     let _ = writeln!(

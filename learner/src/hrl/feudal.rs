@@ -17,7 +17,8 @@
 //! steps of the interval, and its transition is discounted by `γ^k`
 //! ([`interval_transition`]). An interval that the episode's step limit
 //! cut (truncation, not termination) bootstraps from the Manager's value of
-//! the episode's final state ([`Manager::final_values`]). The Manager's core steps once per decision.
+//! the episode's final state ([`Manager::final_values`]). The Manager's
+//! core steps once per decision.
 //! Decisions are kept per environment ([`DecisionQueue`]); an interval
 //! still running at the end of a rollout is trained in the next one: the
 //! queue carries it over together with the core state before it, so every
@@ -97,8 +98,9 @@ pub struct Decision {
     pub final_value: Option<f32>,
 }
 
-/// One environment's decisions not yet trained, oldest first, and the
-/// Manager's core state before the first of them.
+/// One environment's decisions not yet trained, oldest first. (The
+/// Manager's core state before the first of them is kept beside the
+/// queues, one row per environment: the `init` of [`Manager::loss`].)
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DecisionQueue {
     /// The decisions; the last one is the interval under way.

@@ -8,7 +8,7 @@
 //! - [`traversal`]: world graph traversal (section 4.3);
 //! - [`steering`]: `π_g` steering traversals in stochastic worlds, and its
 //!   fine-tuning (section 4.3);
-//! - [`init`]: initialisation from `π_g` (section 5, Control Experiments).
+//! - [`init`]: initialisation from `π_g` (section 4.4).
 //!
 //! [`HrlAgent`] runs one of them on a [`BatchEnvironment`]: `A2C`, `FN`
 //! (Manager over every valid cell) or `WN` (wide goals from `V_all`,
@@ -51,6 +51,7 @@ use steering::{Leg, Steering};
 use traversal::{Execution, Progress, Traversal};
 use wide_narrow::{WideNarrowHead, Window};
 use worker::{EpisodeEnd, WorkerGoal};
+pub use worker::WorkerTaskEnd;
 
 /// Which agent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -142,6 +143,9 @@ pub struct AgentConfig {
     /// The Manager's goal map ([`feudal::GoalMap`]): a fully convolutional
     /// logit per cell added to its goal head's (FN, WN).
     pub goal_map: bool,
+    /// How the Worker books a step on which the task ended the episode
+    /// before it reached `g_n` ([`worker::WorkerTaskEnd`]).
+    pub worker_task_end: WorkerTaskEnd,
 }
 
 impl Default for AgentConfig {
@@ -164,6 +168,7 @@ impl Default for AgentConfig {
             fine_tune_pi_g: true,
             hand_over: HandOver::default(),
             goal_map: true,
+            worker_task_end: WorkerTaskEnd::default(),
         }
     }
 }
@@ -1221,7 +1226,7 @@ impl HrlAgent {
                     }
                 }
             } else {
-                let mut s = c.goal.book(cell, end, horizon, goal_r, penalty);
+                let mut s = c.goal.book(cell, end, horizon, goal_r, penalty, self.cfg.worker_task_end);
                 stats.reached += usize::from(s.reached);
                 interval_over |= s.interval_over;
                 if s.bootstrap {

@@ -48,6 +48,26 @@ impl EpisodeEnd {
     }
 }
 
+/// How the Worker books a step on which the task ended the environment's
+/// episode (the exit, lava) before it reached `g_n`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WorkerTaskEnd {
+    /// As the end of its goal episode with nothing more to earn. The
+    /// Worker is paid only for its goals, so it learns to keep off every
+    /// cell that ends the episode unless it is `g_n`: it walks around the
+    /// exit, and once the Manager has learnt to collect the balls without
+    /// naming the exit, no episode exits again and the Manager never
+    /// learns that the exit pays.
+    Terminal,
+    /// As a cut, like the step limit's: bootstrapped from the Worker's
+    /// value of the final state. The episode's end is the Manager's
+    /// affair (its reward, its termination); to the Worker the exit is a
+    /// cell like any other, neither a goal nor a trap.
+    #[default]
+    Cut,
+}
+
 /// The Worker's goals in one environment's current interval.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WorkerGoal {
@@ -98,7 +118,8 @@ impl WorkerGoal {
     /// Books one Worker step whose action led the agent to `cell` (on the
     /// step that ends the environment's episode: the finished episode's
     /// final cell), with the episode's state `end`, horizon `horizon`, goal
-    /// reward `goal` and step penalty `penalty`.
+    /// reward `goal` and step penalty `penalty`; `task_end` says how a goal
+    /// episode the task ended (not the Worker's goal) is booked.
     pub fn book(
         &mut self,
         cell: u32,
@@ -106,6 +127,7 @@ impl WorkerGoal {
         horizon: u32,
         goal: f32,
         penalty: f32,
+        task_end: WorkerTaskEnd,
     ) -> WorkerStep {
         self.steps += 1;
         let moved = cell != self.last_cell;
@@ -123,7 +145,13 @@ impl WorkerGoal {
             done: over,
             interval_over: over,
             reached,
-            bootstrap: end == EpisodeEnd::Truncated && !reached && !horizon_over,
+            bootstrap: !reached
+                && !horizon_over
+                && match end {
+                    EpisodeEnd::Truncated => true,
+                    EpisodeEnd::Terminated => task_end == WorkerTaskEnd::Cut,
+                    EpisodeEnd::Running => false,
+                },
         }
     }
 
@@ -155,44 +183,44 @@ mod tests {
         let (goal, penalty, c) = (1.0, -0.01, 20);
         // Wide-then-Narrow: g_w = 10, g_n = 12, set on cell 2.
         let mut g = WorkerGoal::new(10, 12, 2);
-        let s = g.book(3, Running, c, goal, penalty);
+        let s = g.book(3, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!((s.reward, s.done, s.interval_over), (penalty, false, false));
-        let s = g.book(10, Running, c, goal, penalty);
+        let s = g.book(10, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty + goal, "g_w is paid");
         assert!(!s.done, "reaching g_w does not end the interval");
-        let s = g.book(11, Running, c, goal, penalty);
+        let s = g.book(11, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty);
-        let s = g.book(10, Running, c, goal, penalty);
+        let s = g.book(10, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty, "g_w is paid once per interval");
-        let s = g.book(12, Running, c, goal, penalty);
+        let s = g.book(12, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty + goal, "g_n is paid");
         assert!(s.done && s.interval_over && s.reached && !s.bootstrap);
         // The horizon ends the interval unpaid.
         let mut g = WorkerGoal::new(10, 12, 2);
         let steps: Vec<WorkerStep> = (0..c)
-            .map(|_| g.book(5, Running, c, goal, penalty))
+            .map(|_| g.book(5, Running, c, goal, penalty, WorkerTaskEnd::Terminal))
             .collect();
         assert!(steps[..c as usize - 1].iter().all(|s| !s.done));
         assert!(steps[c as usize - 1].interval_over);
         assert!(steps.iter().all(|s| s.reward == penalty && !s.bootstrap));
         // Feudal: one goal, paid once.
         let mut g = WorkerGoal::new(7, 7, 2);
-        let s = g.book(7, Running, c, goal, penalty);
+        let s = g.book(7, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty + goal);
         // A hand-over pays g_w unless it was paid already.
         let mut g = WorkerGoal::new(10, 12, 2);
-        let mut s = g.book(4, Running, c, goal, penalty);
+        let mut s = g.book(4, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         g.hand_over(&mut s, goal);
         assert_eq!(s.reward, penalty + goal);
         assert!(s.done);
-        let mut s = g.book(10, Running, c, goal, penalty);
+        let mut s = g.book(10, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty, "g_w was paid at the hand-over");
         g.hand_over(&mut s, goal);
         assert_eq!(s.reward, penalty);
         // An unpaid hand-over (HandOver::Unpaid) ends the goal episode on
         // the step penalty alone.
         let mut g = WorkerGoal::new(10, 12, 2);
-        let mut s = g.book(4, Running, c, goal, penalty);
+        let mut s = g.book(4, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         g.hand_over(&mut s, 0.0);
         assert_eq!(s.reward, penalty);
         assert!(s.done);
@@ -204,24 +232,35 @@ mod tests {
         // g_n is the exit (cell 12): the step onto it terminates the
         // episode, and the record's end cell is the exit.
         let mut g = WorkerGoal::new(10, 12, 11);
-        let s = g.book(12, Terminated, c, goal, penalty);
+        let s = g.book(12, Terminated, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty + goal, "arrival at the exit is paid");
         assert!(s.done && s.interval_over && s.reached);
         assert!(!s.bootstrap, "termination is not bootstrapped");
         // g_w reached on a truncated step: paid, and the cut goal episode
         // bootstraps.
         let mut g = WorkerGoal::new(10, 12, 9);
-        let s = g.book(10, Truncated, c, goal, penalty);
+        let s = g.book(10, Truncated, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty + goal);
         assert!(s.done && s.interval_over && !s.reached && s.bootstrap);
-        // Missing on a terminated step (lava) ends the interval unpaid.
+        // Missing on a terminated step (lava, or the exit when it is not
+        // g_n) ends the interval unpaid; as a terminal, or as a cut that
+        // bootstraps from the final state (WorkerTaskEnd::Cut).
         let mut g = WorkerGoal::new(10, 12, 9);
-        let s = g.book(8, Terminated, c, goal, penalty);
+        let s = g.book(8, Terminated, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty);
         assert!(s.done && !s.bootstrap);
+        let mut g = WorkerGoal::new(10, 12, 9);
+        let s = g.book(8, Terminated, c, goal, penalty, WorkerTaskEnd::Cut);
+        assert_eq!(s.reward, penalty);
+        assert!(s.done && s.interval_over && s.bootstrap);
+        // Reaching g_n on it is paid and ends the goal episode either way.
+        let mut g = WorkerGoal::new(10, 12, 11);
+        let s = g.book(12, Terminated, c, goal, penalty, WorkerTaskEnd::Cut);
+        assert_eq!(s.reward, penalty + goal);
+        assert!(s.done && s.reached && !s.bootstrap);
         // A truncation on the horizon's last step is the horizon's end.
         let mut g = WorkerGoal::new(10, 12, 9);
-        let s = g.book(8, Truncated, 1, goal, penalty);
+        let s = g.book(8, Truncated, 1, goal, penalty, WorkerTaskEnd::Terminal);
         assert!(s.done && !s.bootstrap);
     }
 
@@ -230,23 +269,23 @@ mod tests {
         let (goal, penalty, c) = (1.0, -0.01, 20);
         // g_n on the agent's own cell: a turn earns nothing.
         let mut g = WorkerGoal::new(30, 5, 5);
-        let s = g.book(5, Running, c, goal, penalty);
+        let s = g.book(5, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty, "turning on the goal is not reaching it");
         assert!(!s.done);
-        g.book(6, Running, c, goal, penalty);
-        let s = g.book(5, Running, c, goal, penalty);
+        g.book(6, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
+        let s = g.book(5, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty + goal, "coming back is");
         assert!(s.reached);
         // g_w under the agent counts as reached already.
         let mut g = WorkerGoal::new(5, 9, 5);
         assert!(g.wide_paid);
-        g.book(6, Running, c, goal, penalty);
-        let s = g.book(5, Running, c, goal, penalty);
+        g.book(6, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
+        let s = g.book(5, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty, "g_w is not paid for the start");
         // A traversal's steps move the agent without booking.
         let mut g = WorkerGoal::new(30, 9, 5);
         g.moved_to(9);
-        let s = g.book(9, Running, c, goal, penalty);
+        let s = g.book(9, Running, c, goal, penalty, WorkerTaskEnd::Terminal);
         assert_eq!(s.reward, penalty, "the Worker did not bring it there");
     }
 }
