@@ -231,15 +231,18 @@ fn paper2(config: &str, maze: &str) -> String {
     }
 }
 
-/// The mean time to score (env steps, wall seconds) of the runs `rs` that
-/// reach `threshold`, or `None` if none does.
-fn mean_reach(rs: &[&RunResult], threshold: f64) -> Option<(f64, f64)> {
-    let reached: Vec<(u64, f64)> = rs.iter().filter_map(|r| first_reach(r, threshold)).collect();
+/// The times to score of the runs `rs` that reach `threshold`.
+fn reached_by(rs: &[&RunResult], threshold: f64) -> Vec<(u64, f64)> {
+    rs.iter().filter_map(|r| first_reach(r, threshold)).collect()
+}
+
+/// Mean ± std of the env steps and of the wall seconds of `reached`, or
+/// `None` if it is empty.
+fn reach_moments(reached: &[(u64, f64)]) -> Option<((f64, f64), (f64, f64))> {
     (!reached.is_empty()).then(|| {
-        let n = reached.len() as f64;
         (
-            reached.iter().map(|x| x.0 as f64).sum::<f64>() / n,
-            reached.iter().map(|x| x.1).sum::<f64>() / n,
+            mean_std(&reached.iter().map(|x| x.0 as f64).collect::<Vec<_>>()),
+            mean_std(&reached.iter().map(|x| x.1).collect::<Vec<_>>()),
         )
     })
 }
@@ -527,26 +530,23 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             .find(|(c, _)| c.as_str() == "a2c")
             .map(|(_, rs)| *rs);
         let has_a2c = a2c.is_some();
-        let reference = a2c.and_then(|rs| mean_reach(rs, threshold));
+        let reference = a2c.and_then(|rs| reach_moments(&reached_by(rs, threshold)));
         for (c, rs) in here {
-            let reached: Vec<(u64, f64)> = rs
-                .iter()
-                .filter_map(|r| first_reach(r, threshold))
-                .collect();
-            let speed_up = match (c.as_str(), reference, mean_reach(rs, threshold)) {
+            let reached = reached_by(rs, threshold);
+            let moments = reach_moments(&reached);
+            let speed_up = match (c.as_str(), reference, moments) {
                 ("a2c", Some(_), _) => "1 (reference)".to_string(),
-                (_, Some((a_steps, a_wall)), Some((steps, wall))) => {
+                (_, Some(((a_steps, _), (a_wall, _))), Some(((steps, _), (wall, _)))) => {
                     format!("{:.2}× / {:.2}×", a_steps / steps, a_wall / wall)
                 }
                 (_, None, Some(_)) if has_a2c => "A2C did not reach it".to_string(),
                 _ => "—".to_string(),
             };
-            let (steps, wall) = if reached.is_empty() {
-                ("—".to_string(), "—".to_string())
-            } else {
-                let (sm, ss) = mean_std(&reached.iter().map(|x| x.0 as f64).collect::<Vec<_>>());
-                let (wm, ws) = mean_std(&reached.iter().map(|x| x.1).collect::<Vec<_>>());
-                (format!("{sm:.0} ± {ss:.0}"), format!("{wm:.0} ± {ws:.0}"))
+            let (steps, wall) = match moments {
+                None => ("—".to_string(), "—".to_string()),
+                Some(((sm, ss), (wm, ws))) => {
+                    (format!("{sm:.0} ± {ss:.0}"), format!("{wm:.0} ± {ws:.0}"))
+                }
             };
             let _ = writeln!(
                 tts,
