@@ -288,7 +288,8 @@ mod tests {
         };
         assert_eq!(UpdateRow::parse(&r.csv_line()), Some(r));
         // The 17 fields of the version before the ball column.
-        let exit = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5";
+        let exit =
+            "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5";
         let e = UpdateRow::parse(exit).expect("a row without the ball column reads");
         assert_eq!((e.exit_share, e.exit_goal_share), (0.125, 0.5));
         assert!(e.ball_goal_share.is_nan());

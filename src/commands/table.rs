@@ -233,7 +233,9 @@ fn paper2(config: &str, maze: &str) -> String {
 
 /// The times to score of the runs `rs` that reach `threshold`.
 fn reached_by(rs: &[&RunResult], threshold: f64) -> Vec<(u64, f64)> {
-    rs.iter().filter_map(|r| first_reach(r, threshold)).collect()
+    rs.iter()
+        .filter_map(|r| first_reach(r, threshold))
+        .collect()
 }
 
 /// Mean ± std of the env steps and of the wall seconds of `reached`, or
@@ -508,7 +510,10 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             .map(|(_, rs)| mean_std(&rs.iter().map(|r| r.best_validation).collect::<Vec<_>>()).0)
             .fold(f64::NEG_INFINITY, f64::max);
         if best <= 0.0 {
-            let _ = writeln!(tts, "| {m} | {t} | — | every configuration | 0 | — | — | — |");
+            let _ = writeln!(
+                tts,
+                "| {m} | {t} | — | every configuration | 0 | — | — | — |"
+            );
             continue;
         }
         let threshold = a.threshold * best;

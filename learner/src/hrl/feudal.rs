@@ -144,7 +144,8 @@ impl GoalMap {
         GoalMap {
             conv1: nn::conv2d(p / "conv1", in_channels, channels, 3, same),
             conv2: nn::conv2d(p / "conv2", channels, 1, 3, zero),
-            cells: cells.map(|c| Tensor::from_slice(&c.iter().map(|&x| i64::from(x)).collect::<Vec<_>>())),
+            cells: cells
+                .map(|c| Tensor::from_slice(&c.iter().map(|&x| i64::from(x)).collect::<Vec<_>>())),
         }
     }
 
@@ -423,8 +424,18 @@ mod tests {
     fn ball_at(w: i64, h: i64, x: i64, y: i64) -> Tensor {
         let planes = Tensor::zeros([1, BASE_CHANNELS as i64, h, w], (Kind::Float, Device::Cpu));
         let _ = planes.get(0).get(sim::Object::Floor as i64).fill_(1.0);
-        let _ = planes.get(0).get(sim::Object::Floor as i64).get(y).get(x).fill_(0.0);
-        let _ = planes.get(0).get(sim::Object::Ball as i64).get(y).get(x).fill_(1.0);
+        let _ = planes
+            .get(0)
+            .get(sim::Object::Floor as i64)
+            .get(y)
+            .get(x)
+            .fill_(0.0);
+        let _ = planes
+            .get(0)
+            .get(sim::Object::Ball as i64)
+            .get(y)
+            .get(x)
+            .fill_(1.0);
         planes
     }
 
@@ -451,7 +462,9 @@ mod tests {
         });
         let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
         for _ in 0..40 {
-            let logp = map.logits_dense(&ball_at(w, h, 5, 2)).log_softmax(-1, Kind::Float);
+            let logp = map
+                .logits_dense(&ball_at(w, h, 5, 2))
+                .log_softmax(-1, Kind::Float);
             opt.backward_step(&(-logp.get(0).get(2 * w + 5)));
         }
         let cells = [3u32, 19, 30, 40];
@@ -482,7 +495,9 @@ mod tests {
         let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
         let cell = |x: i64, y: i64| y * w + x;
         for _ in 0..60 {
-            let logp = map.logits_dense(&ball_at(w, h, 2, 2)).log_softmax(-1, Kind::Float);
+            let logp = map
+                .logits_dense(&ball_at(w, h, 2, 2))
+                .log_softmax(-1, Kind::Float);
             opt.backward_step(&(-logp.get(0).get(cell(2, 2))));
         }
         let p = map

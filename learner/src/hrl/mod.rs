@@ -50,8 +50,8 @@ use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
 use steering::{Leg, Steering};
 use traversal::{Execution, Progress, Traversal};
 use wide_narrow::{WideNarrowHead, Window};
-use worker::{EpisodeEnd, WorkerGoal};
 pub use worker::WorkerTaskEnd;
+use worker::{EpisodeEnd, WorkerGoal};
 
 /// Which agent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -919,7 +919,10 @@ impl HrlAgent {
             }
             ManagerHead::WideNarrow(head) => {
                 let window = self.window.as_ref().expect("WN has a window");
-                let wide = crate::seeding::sample_index(&mut ctl.rng, &head.wide(&h, bias.as_ref()).probs());
+                let wide = crate::seeding::sample_index(
+                    &mut ctl.rng,
+                    &head.wide(&h, bias.as_ref()).probs(),
+                );
                 let mut locals = Vec::new();
                 let mut valids = Vec::new();
                 for (j, &e) in who.iter().enumerate() {
@@ -1226,7 +1229,14 @@ impl HrlAgent {
                     }
                 }
             } else {
-                let mut s = c.goal.book(cell, end, horizon, goal_r, penalty, self.cfg.worker_task_end);
+                let mut s = c.goal.book(
+                    cell,
+                    end,
+                    horizon,
+                    goal_r,
+                    penalty,
+                    self.cfg.worker_task_end,
+                );
                 stats.reached += usize::from(s.reached);
                 interval_over |= s.interval_over;
                 if s.bootstrap {
