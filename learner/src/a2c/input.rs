@@ -294,6 +294,55 @@ impl CellInput {
         Tensor::from_slice(&buf).view([n as i64, c as i64, self.height as i64, self.width as i64])
     }
 
+    /// Calls `f(position, row)` for every 1 of observation `i`'s dense
+    /// planes under a 3×3 kernel (stride 1, zero padding 1): `position`
+    /// is the output cell `y · width + x`, `row = channel · 9 + tap` the
+    /// input channel and kernel tap (`tap = 3 · (dy + 1) + (dx + 1)`) it
+    /// lies under. The first convolution at a position is the sum of the
+    /// kernel columns of its rows (the own kernel of
+    /// [`crate::a2c::kernels::FirstConv`]).
+    pub fn for_each_one(&self, i: usize, mut f: impl FnMut(usize, usize)) {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let hw = self.width * self.height;
+        let codes = &self.codes[i * hw..(i + 1) * hw];
+        let key = self.keys[i];
+        for y in 0..h {
+            for x in 0..w {
+                let p = (y * w + x) as usize;
+                for (k, dy, dx) in CellInput::taps() {
+                    let (qy, qx) = (y + dy, x + dx);
+                    if (0..h).contains(&qy) && (0..w).contains(&qx) {
+                        f(p, codes[(qy * w + qx) as usize] as usize * TAPS + k);
+                        if key {
+                            f(p, KEY_CHANNEL * TAPS + k);
+                        }
+                    }
+                }
+            }
+        }
+        let mut mark = |q: u32, channel: usize| {
+            let (qy, qx) = (i64::from(q) / w, i64::from(q) % w);
+            for (k, dy, dx) in CellInput::taps() {
+                let (py, px) = (qy - dy, qx - dx);
+                if (0..h).contains(&py) && (0..w).contains(&px) {
+                    f((py * w + px) as usize, channel * TAPS + k);
+                }
+            }
+        };
+        let (agent, dir) = self.agents[i];
+        if agent != u32::MAX {
+            mark(agent, OBJECT_CHANNELS + dir as usize);
+        }
+        for (k, &g) in self.goals[i * self.slots..(i + 1) * self.slots]
+            .iter()
+            .enumerate()
+        {
+            if (g as usize) < hw {
+                mark(g, GOAL_CHANNEL + k);
+            }
+        }
+    }
+
     /// The kernel tap offsets `(dy, dx)` in the order of a 3×3 kernel.
     fn taps() -> impl Iterator<Item = (usize, i64, i64)> {
         (0..TAPS).map(|k| (k, k as i64 / 3 - 1, k as i64 % 3 - 1))

@@ -22,7 +22,9 @@
 //!   `worldgraph bench learner`;
 //! - [`a2c_loss`]: `L = L_π + c_V · L_V − c_H · H` over weighted entries.
 
+pub mod gemm;
 pub mod input;
+pub mod kernels;
 pub mod net;
 pub mod optim;
 pub mod rollout;
