@@ -10,6 +10,9 @@
 //! - [`input`]: the observation as the first convolution's input, densely
 //!   (the plain path) or as embedding-bag indices (the fast path);
 //! - [`net`]: the CNN + LSTM trunk and the policy/value heads;
+//! - [`kernels`], [`gemm`], [`encoder`]: the trunk's encoder in kernels of
+//!   the project's own (plain Rust over the `gemm` crate), forward and
+//!   backward, and the rollout path that runs it around tch's graph;
 //! - [`advantages`]: generalised advantage estimation with a discount per
 //!   transition (`γ` for one env step, `γ^k` for a Manager interval of `k`
 //!   steps);
@@ -22,6 +25,7 @@
 //!   `worldgraph bench learner`;
 //! - [`a2c_loss`]: `L = L_π + c_V · L_V − c_H · H` over weighted entries.
 
+pub mod encoder;
 pub mod gemm;
 pub mod input;
 pub mod kernels;

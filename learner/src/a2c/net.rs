@@ -206,6 +206,36 @@ impl Trunk {
         self.conv1.ws.shallow_clone()
     }
 
+    /// The encoder's parameters, in order: the first convolution's weight
+    /// and bias, the second's, the linear layer's (what
+    /// [`crate::a2c::encoder::RustEncoder`] runs).
+    pub fn encoder_parameters(&self) -> [Tensor; 6] {
+        let bias = |b: &Option<Tensor>| {
+            b.as_ref()
+                .expect("invariant: the encoder's layers have biases")
+                .shallow_clone()
+        };
+        [
+            self.conv1.ws.shallow_clone(),
+            bias(&self.conv1.bs),
+            self.conv2.ws.shallow_clone(),
+            bias(&self.conv2.bs),
+            self.fc.ws.shallow_clone(),
+            bias(&self.fc.bs),
+        ]
+    }
+
+    /// The core's parameters (`weight_ih`, `weight_hh`, `bias_ih`, `bias_hh`).
+    pub fn core_parameters(&self) -> [Tensor; 4] {
+        let c = &self.core;
+        [&c.w_ih, &c.w_hh, &c.b_ih, &c.b_hh].map(Tensor::shallow_clone)
+    }
+
+    /// Output channels of the two convolutions.
+    pub fn conv_channels(&self) -> [i64; 2] {
+        [self.conv1.ws.size()[0], self.conv2.ws.size()[0]]
+    }
+
     /// Width of the features and of the core.
     pub fn hidden(&self) -> i64 {
         self.hidden
@@ -382,6 +412,33 @@ impl ActorCritic {
         }
     }
 
+    /// One step from encoder features `[B, hidden]`: the core and the heads
+    /// (the encoder ran elsewhere, [`crate::a2c::encoder::RustEncoder`]).
+    pub fn step_features(&self, features: &Tensor, state: &LstmState) -> ActorCriticOutput {
+        let state = self.trunk.step(features, state);
+        let (logits, value) = self.heads(&state.h);
+        ActorCriticOutput {
+            logits,
+            value,
+            state,
+        }
+    }
+
+    /// The heads' parameters (policy weight and bias, value weight and bias).
+    pub fn head_parameters(&self) -> [Tensor; 4] {
+        let bias = |b: &Option<Tensor>| {
+            b.as_ref()
+                .expect("invariant: the heads have biases")
+                .shallow_clone()
+        };
+        [
+            self.policy.ws.shallow_clone(),
+            bias(&self.policy.bs),
+            self.value.ws.shallow_clone(),
+            bias(&self.value.bs),
+        ]
+    }
+
     /// One step on dense one-hot planes `[B, C, H, W]` (the plain path).
     pub fn forward(&self, obs: &Tensor, state: &LstmState) -> ActorCriticOutput {
         let state = self.trunk.step(&self.trunk.features_dense(obs), state);
@@ -445,7 +502,7 @@ pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: super::rollout:
             let fwd = 2.0 * (c1 + rest + heads);
             2.0 * fwd + 2.0 * c1 + 4.0 * (rest + heads)
         }
-        super::rollout::GradPath::PerStep => {
+        super::rollout::GradPath::PerStep | super::rollout::GradPath::RustEncoder => {
             let (c1, rest) = trunk_macs(trunk, Some(10.0));
             let fwd = 2.0 * (c1 + rest + heads);
             fwd + 2.0 * c1 + 4.0 * (rest + heads)

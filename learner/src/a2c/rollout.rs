@@ -16,31 +16,76 @@
 //!   autograd (first layer by gather-and-sum) and keeps its logits and
 //!   value; the update back-propagates through those graphs;
 //! - [`GradPath::Plain`]: the same with the dense first convolution over
-//!   one-hot planes (the benchmark's baseline).
+//!   one-hot planes (the benchmark's baseline);
+//! - [`GradPath::RustEncoder`]: the encoder in the project's own kernels
+//!   outside the graph, each step's features a leaf of its graph, the
+//!   encoder's backward run once over the whole rollout
+//!   ([`crate::a2c::encoder`]).
 //!
-//! All three give the same loss and gradients for the same rollout (a test
-//! checks it). Which is fastest is measured by `worldgraph bench learner`:
+//! All four give the same loss and gradients for the same rollout (tests
+//! check it). Which is fastest is measured by `worldgraph bench learner`:
 //! with these small networks on a CPU the update is compute-bound, so the
 //! recomputation's second forward pass costs more than batching saves.
 
 use tch::{Kind, Tensor, nn};
 
+use super::encoder::{RustEncoder, with_gradients};
 use super::input::{CellInput, GoalMarks, encode_obs, goal_planes};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
 use super::{A2cConfig, Categorical, LossFigures, PhaseTimes, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
 
 /// How the update gets its gradients (module docs).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GradPath {
     /// Act without gradient, recompute the rollout in one batch.
     Recompute,
     /// Keep the autograd graph of every step; gather-and-sum first layer.
-    #[default]
     PerStep,
     /// The plain implementation: the autograd graph of every step, the
     /// dense first convolution over one-hot planes.
     Plain,
+    /// The encoder in the own kernels, its features a leaf of every step's
+    /// graph (the core and heads), its backward once over the rollout.
+    RustEncoder,
+}
+
+impl GradPath {
+    /// The path named `name` (`recompute`, `per-step`, `plain`,
+    /// `rust-encoder`).
+    pub fn from_name(name: &str) -> Option<GradPath> {
+        Some(match name {
+            "recompute" => GradPath::Recompute,
+            "per-step" => GradPath::PerStep,
+            "plain" => GradPath::Plain,
+            "rust-encoder" => GradPath::RustEncoder,
+            _ => return None,
+        })
+    }
+
+    /// Its name (as [`Self::from_name`] reads it).
+    pub fn name(self) -> &'static str {
+        match self {
+            GradPath::Recompute => "recompute",
+            GradPath::PerStep => "per-step",
+            GradPath::Plain => "plain",
+            GradPath::RustEncoder => "rust-encoder",
+        }
+    }
+}
+
+impl Default for GradPath {
+    /// [`GradPath::PerStep`], or the path `WORLDGRAPH_GRAD_PATH` names (read
+    /// once per process).
+    fn default() -> GradPath {
+        static PATH: std::sync::OnceLock<GradPath> = std::sync::OnceLock::new();
+        *PATH.get_or_init(|| {
+            std::env::var("WORLDGRAPH_GRAD_PATH")
+                .ok()
+                .and_then(|v| GradPath::from_name(&v))
+                .unwrap_or(GradPath::PerStep)
+        })
+    }
 }
 
 /// One rollout of an every-step agent.
@@ -53,6 +98,15 @@ pub struct Rollout {
     /// Logits and values of every step with their graphs (per-step path).
     graph_logits: Vec<Tensor>,
     graph_values: Vec<Tensor>,
+    /// The encoder of the own kernels and its activations (rust-encoder
+    /// path; behind a lock because [`Self::loss`] runs its backward
+    /// through `&self`).
+    encoder: std::sync::Mutex<Option<RustEncoder>>,
+    /// Whether the encoder's weights are to be re-read before the next
+    /// step (set by [`Self::start`]: an update may have changed them).
+    encoder_stale: bool,
+    /// Every step's features, the leaves of its graph (rust-encoder path).
+    leaves: Vec<Tensor>,
     /// Actions `[T·B]`.
     pub actions: Vec<i64>,
     /// Rewards `[T·B]`.
@@ -90,6 +144,9 @@ impl Rollout {
             inputs: CellInput::new(width, height, goal_planes),
             graph_logits: Vec::new(),
             graph_values: Vec::new(),
+            encoder: std::sync::Mutex::new(None),
+            encoder_stale: true,
+            leaves: Vec::new(),
             actions: Vec::new(),
             rewards: Vec::new(),
             dones: Vec::new(),
@@ -117,6 +174,8 @@ impl Rollout {
         self.inputs.clear();
         self.graph_logits.clear();
         self.graph_values.clear();
+        self.leaves.clear();
+        self.encoder_stale = true;
         self.actions.clear();
         self.rewards.clear();
         self.dones.clear();
@@ -148,6 +207,37 @@ impl Rollout {
                 self.values.extend(floats(&out.value));
                 PhaseTimes::lap(&mut self.times.act, t1);
                 out
+            }
+            GradPath::RustEncoder => {
+                let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
+                input.push_obs(obs, goals);
+                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
+                let slot = self
+                    .encoder
+                    .get_mut()
+                    .unwrap_or_else(|poisoned| poisoned.into_inner());
+                let encoder = match slot {
+                    Some(e) => {
+                        if self.encoder_stale {
+                            e.load(net.trunk());
+                        }
+                        e
+                    }
+                    None => slot.insert(RustEncoder::new(net.trunk())),
+                };
+                self.encoder_stale = false;
+                let features = encoder.forward(&input).set_requires_grad(true);
+                let out = net.step_features(&features, state);
+                self.leaves.push(features);
+                self.values.extend(floats(&out.value.detach()));
+                PhaseTimes::lap(&mut self.times.act, t1);
+                self.graph_logits.push(out.logits.shallow_clone());
+                self.graph_values.push(out.value.shallow_clone());
+                ActorCriticOutput {
+                    logits: out.logits.detach(),
+                    value: out.value.detach(),
+                    state: out.state,
+                }
             }
             GradPath::PerStep | GradPath::Plain => {
                 let (x, input) = if self.path == GradPath::Plain {
@@ -214,7 +304,7 @@ impl Rollout {
                 let (logits, values) = net.heads(&hs.view([steps * b, -1]));
                 (logits, values)
             }
-            GradPath::PerStep | GradPath::Plain => (
+            GradPath::PerStep | GradPath::Plain | GradPath::RustEncoder => (
                 Tensor::cat(&self.graph_logits, 0),
                 Tensor::cat(&self.graph_values, 0),
             ),
@@ -234,7 +324,55 @@ impl Rollout {
             entropy: pi.entropy(),
             value: values.to_kind(Kind::Float),
         };
-        a2c_loss(&terms, &adv, &ret, &self.weights, cfg)
+        let (loss, figures) = a2c_loss(&terms, &adv, &ret, &self.weights, cfg);
+        if self.path == GradPath::RustEncoder {
+            return (self.encoder_backward(net, &loss), figures);
+        }
+        (loss, figures)
+    }
+
+    /// The rust-encoder path's backward: back-propagates `loss` through the
+    /// steps' graphs to their feature leaves and to the core's and heads'
+    /// parameters, then runs the encoder's backward over the whole rollout;
+    /// returns the loss whose `backward` hands all these gradients to the
+    /// caller's optimiser ([`with_gradients`]).
+    fn encoder_backward(&self, net: &ActorCritic, loss: &Tensor) -> Tensor {
+        let trunk = net.trunk();
+        let rest: Vec<Tensor> = trunk
+            .core_parameters()
+            .into_iter()
+            .chain(net.head_parameters())
+            .filter(Tensor::requires_grad)
+            .collect();
+        let inputs: Vec<&Tensor> = self.leaves.iter().chain(&rest).collect();
+        let grads = Tensor::run_backward(&[loss], &inputs, false, false);
+        let (leaf_grads, rest_grads) = grads.split_at(self.leaves.len());
+        let dfeatures: Vec<Tensor> = leaf_grads
+            .iter()
+            .zip(&self.leaves)
+            .map(|(g, leaf)| {
+                if g.defined() {
+                    g.shallow_clone()
+                } else {
+                    leaf.zeros_like()
+                }
+            })
+            .collect();
+        let dfeatures = floats(&Tensor::cat(&dfeatures, 0));
+        let mut slot = self
+            .encoder
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let encoder = slot
+            .as_mut()
+            .expect("invariant: the rust-encoder path encoded the rollout's steps");
+        let encoder_grads = encoder.backward(&dfeatures);
+        let params: Vec<Tensor> = trunk.encoder_parameters().into_iter().chain(rest).collect();
+        let grads: Vec<Tensor> = encoder_grads
+            .into_iter()
+            .chain(rest_grads.iter().map(Tensor::shallow_clone))
+            .collect();
+        with_gradients(loss, &params, &grads)
     }
 
     /// The update: [`Self::loss`], then one clipped Adam step.
@@ -337,11 +475,17 @@ mod tests {
         steps: usize,
         seed: u64,
     ) -> Rollout {
+        let mut rollout = Rollout::new(path, 5, layout.width, layout.height, 1);
+        refill(&mut rollout, net, layout, steps, seed);
+        rollout
+    }
+
+    /// [`fill`] into an existing rollout of 5 environments.
+    fn refill(rollout: &mut Rollout, net: &ActorCritic, layout: &Layout, steps: usize, seed: u64) {
         let n = 5;
         let cfg = EnvConfig::for_task(Task::MultiGoal, layout);
         let mut env = InProcess::new(layout.clone(), cfg, n, seed, 1).expect("env");
         let mut rng = SmallRng::seed_from_u64(seed);
-        let mut rollout = Rollout::new(path, n, layout.width, layout.height, 1);
         let mut state = net.zero_state(n as i64);
         rollout.start(&state);
         let goals: Vec<u32> = (0..n as u32).map(|i| 14 + 3 * i).collect();
@@ -359,7 +503,6 @@ mod tests {
         }
         rollout.bootstrap =
             bootstrap_values(net, &env.observe(), Some(GoalMarks::one(&goals)), &state);
-        rollout
     }
 
     #[test]
@@ -433,5 +576,181 @@ mod tests {
                 "{name} has no gradient"
             );
         }
+    }
+
+    /// The loss and every parameter's gradient of `rollout` (the gradients
+    /// zeroed first), by parameter name.
+    fn loss_and_gradients(
+        rollout: &Rollout,
+        net: &ActorCritic,
+        vs: &nn::VarStore,
+    ) -> (f64, LossFigures, Vec<(String, Tensor)>) {
+        for v in vs.trainable_variables() {
+            if v.grad().defined() {
+                let _ = v.grad().zero_();
+            }
+        }
+        let (loss, figures) = rollout.loss(net, &A2cConfig::default());
+        loss.backward();
+        let mut named: Vec<(String, Tensor)> = vs
+            .variables()
+            .into_iter()
+            .map(|(k, v)| (k, v.grad().copy()))
+            .collect();
+        named.sort_by(|a, b| a.0.cmp(&b.0));
+        (loss.double_value(&[]), figures, named)
+    }
+
+    /// Asserts that two paths' losses differ by less than 1e-5 (absolute)
+    /// and each parameter's gradients by less than 1e-5 of that gradient's
+    /// largest magnitude (relative), and that every gradient is non-zero.
+    fn assert_same_function(
+        what: &str,
+        (loss_a, fig_a, grads_a): &(f64, LossFigures, Vec<(String, Tensor)>),
+        (loss_b, fig_b, grads_b): &(f64, LossFigures, Vec<(String, Tensor)>),
+    ) {
+        assert!(
+            (loss_a - loss_b).abs() < 1e-5,
+            "{what}: losses {loss_a} and {loss_b}"
+        );
+        assert!((fig_a.entropy - fig_b.entropy).abs() < 1e-5, "{what}");
+        assert_eq!(fig_a.entries, fig_b.entries, "{what}");
+        assert_eq!(grads_a.len(), grads_b.len());
+        for ((name, a), (name_b, b)) in grads_a.iter().zip(grads_b) {
+            assert_eq!(name, name_b);
+            let scale = b.abs().max().double_value(&[]);
+            let diff = (a - b).abs().max().double_value(&[]);
+            assert!(scale > 0.0, "{what}: {name} has no gradient");
+            assert!(
+                diff / scale < 1e-5,
+                "{what}: {name}'s gradients differ by {diff:e} (largest {scale:e}, relative {:e})",
+                diff / scale
+            );
+        }
+    }
+
+    /// A network of the agents' default sizes (conv 16/32, LSTM 128).
+    fn default_net(vs: &nn::VarStore, goal_planes: usize, w: usize, h: usize) -> ActorCritic {
+        crate::seeding::init_seeded(11, || {
+            ActorCritic::new(
+                &vs.root(),
+                &ActorCriticConfig {
+                    goal_planes,
+                    ..ActorCriticConfig::default()
+                },
+                w,
+                h,
+            )
+        })
+    }
+
+    #[test]
+    fn the_rust_encoder_gives_the_per_step_loss_and_gradients_on_a_simulator_rollout() {
+        for maze in [Maze::Small, Maze::Medium] {
+            let layout = maze.layout(false);
+            let vs = nn::VarStore::new(tch::Device::Cpu);
+            let net = default_net(&vs, 1, layout.width, layout.height);
+            let run = |path| loss_and_gradients(&fill(path, &net, &layout, 20, 9), &net, &vs);
+            let per_step = run(GradPath::PerStep);
+            let rust = run(GradPath::RustEncoder);
+            assert!(
+                per_step.1.entries < 100.0,
+                "some steps are left out by weight 0"
+            );
+            assert_same_function(&format!("{maze:?}"), &rust, &per_step);
+        }
+    }
+
+    #[test]
+    fn the_rust_encoder_gives_the_per_step_loss_and_gradients_on_random_inputs() {
+        use shm_schemas::EnvMeta;
+
+        use crate::a2c::input::OBJECT_CHANNELS;
+
+        // Random grids (any cell code), agents anywhere facing anywhere,
+        // keys carried or not, two goal slots (one sometimes empty or on
+        // the agent's cell), random rewards and episode ends.
+        let (w, h, n, steps) = (11, 8, 6, 15);
+        let vs = nn::VarStore::new(tch::Device::Cpu);
+        let net = default_net(&vs, 2, w, h);
+        let run = |path| {
+            let mut rng = SmallRng::seed_from_u64(21);
+            let mut rollout = Rollout::new(path, n, w, h, 2);
+            let mut state = net.zero_state(n as i64);
+            rollout.start(&state);
+            let draw = |rng: &mut SmallRng| {
+                let cells: Vec<u8> = (0..n * w * h)
+                    .map(|_| rng.random_range(0..OBJECT_CHANNELS as u8 + 2))
+                    .collect();
+                let meta: Vec<EnvMeta> = (0..n)
+                    .map(|_| EnvMeta {
+                        x: rng.random_range(0..w as u16),
+                        y: rng.random_range(0..h as u16),
+                        dir: rng.random_range(0..4),
+                        carrying: if rng.random_bool(0.3) {
+                            sim::Object::Key as u8
+                        } else {
+                            EnvMeta::CARRYING_NOTHING
+                        },
+                        ..EnvMeta::EMPTY
+                    })
+                    .collect();
+                let goals: Vec<u32> = (0..2 * n)
+                    .map(|k| match rng.random_range(0..4) {
+                        0 => crate::a2c::input::NO_GOAL,
+                        1 => u32::from(meta[k / 2].y) * w as u32 + u32::from(meta[k / 2].x),
+                        _ => rng.random_range(0..(w * h) as u32),
+                    })
+                    .collect();
+                (cells, meta, goals)
+            };
+            for _ in 0..steps {
+                let (cells, meta, goals) = draw(&mut rng);
+                let obs = ObsView {
+                    seq: 0,
+                    cells: &cells,
+                    final_cells: &[],
+                    meta: &meta,
+                    width: w,
+                    height: h,
+                };
+                let marks = GoalMarks {
+                    cells: &goals,
+                    per_env: 2,
+                };
+                let out = rollout.act(&net, &obs, Some(marks), &state);
+                let actions: Vec<u8> = (0..n).map(|_| rng.random_range(0..3)).collect();
+                let rewards: Vec<f32> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                let dones: Vec<bool> = (0..n).map(|_| rng.random_bool(0.2)).collect();
+                rollout.record(&actions, &rewards, &dones, &vec![1.0; n]);
+                state = out.state.reset_done(&mask(&dones));
+            }
+            rollout.bootstrap = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            loss_and_gradients(&rollout, &net, &vs)
+        };
+        let per_step = run(GradPath::PerStep);
+        let rust = run(GradPath::RustEncoder);
+        assert_same_function("random inputs", &rust, &per_step);
+    }
+
+    #[test]
+    fn the_rust_encoder_reads_the_weights_anew_each_rollout() {
+        // Two rollouts into one `Rollout` with an optimiser step between
+        // them: the second's gradients are those of the updated weights.
+        let layout = Maze::Small.layout(false);
+        let results: Vec<_> = [GradPath::PerStep, GradPath::RustEncoder]
+            .into_iter()
+            .map(|path| {
+                let vs = nn::VarStore::new(tch::Device::Cpu);
+                let net = default_net(&vs, 1, layout.width, layout.height);
+                let mut opt = crate::a2c::optim::Adam::new(&[("net", &vs)], 1e-2);
+                let mut rollout = fill(path, &net, &layout, 6, 3);
+                let (loss, _) = rollout.loss(&net, &A2cConfig::default());
+                opt.backward_step(&loss, 0.5);
+                refill(&mut rollout, &net, &layout, 6, 4);
+                loss_and_gradients(&rollout, &net, &vs)
+            })
+            .collect();
+        assert_same_function("after an update", &results[1], &results[0]);
     }
 }
