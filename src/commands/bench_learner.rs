@@ -1,7 +1,9 @@
 //! `worldgraph bench learner`: training throughput of a learner (env-steps
 //! per second of rollout + update), where an iteration's time goes, and the
-//! same updates through the plain path (dense first convolution, autograd
-//! at every rollout step) measured in alternating windows of the same run.
+//! same updates through the other gradient paths (the per-step tch path,
+//! the encoder in the own kernels, the plain path: dense first convolution,
+//! autograd at every rollout step) measured in alternating windows of the
+//! same run.
 //! Also the model's FLOPs per env-step against a dense matrix product's
 //! GFLOP/s on the same threads, and, after the Rust windows, the PyTorch
 //! reference of the same networks and update (`benches/learner_pytorch.py`,
@@ -117,6 +119,21 @@ pub struct PhaseShares {
     pub other: f64,
 }
 
+/// One gradient path's figures in the alternating windows.
+#[derive(Debug, Clone, Serialize)]
+pub struct NamedPath {
+    /// `GradPath::name` (`per-step`, `rust-encoder`, `plain`, `recompute`).
+    pub path: String,
+    /// Whether it is the fast path (the learners' default).
+    pub fast: bool,
+    /// Its figures.
+    pub figures: PathFigures,
+    /// Its env-steps/s over the plain path's, median of the windows.
+    pub over_plain: f64,
+    /// Its env-steps/s over the per-step path's, median of the windows.
+    pub over_per_step: f64,
+}
+
 /// `bench learner`'s report.
 #[derive(Debug, Clone, Serialize)]
 pub struct LearnerBenchReport {
@@ -139,6 +156,9 @@ pub struct LearnerBenchReport {
     pub plain: PathFigures,
     /// Fast over plain env-steps/s, median of the paired windows.
     pub speedup: f64,
+    /// Every path measured (the fast one, `per-step`, `rust-encoder`,
+    /// `plain`), with its ratios to the plain and the per-step path.
+    pub paths: Vec<NamedPath>,
     /// Dense matrix product GFLOP/s on the same threads (the compute bound).
     pub matmul_gflops: f64,
     /// Fast path's achieved GFLOP/s over the matmul bound.
@@ -272,14 +292,22 @@ fn build(
     Ok((learner, env))
 }
 
-/// The path measured as "fast": the default, or `WORLDGRAPH_GRAD_PATH`
-/// (`recompute`, `per-step`).
+/// The path measured as "fast": the learners' default (which
+/// `WORLDGRAPH_GRAD_PATH` can name).
 fn fast_path() -> GradPath {
-    match std::env::var("WORLDGRAPH_GRAD_PATH").as_deref() {
-        Ok("recompute") => GradPath::Recompute,
-        Ok("per-step") => GradPath::PerStep,
-        _ => GradPath::default(),
+    GradPath::default()
+}
+
+/// The paths measured: the fast one, then the per-step tch path and the
+/// own-kernel encoder where the fast one is neither, then the plain path.
+fn measured_paths() -> Vec<GradPath> {
+    let mut paths = vec![fast_path()];
+    for p in [GradPath::PerStep, GradPath::RustEncoder, GradPath::Plain] {
+        if !paths.contains(&p) {
+            paths.push(p);
+        }
     }
+    paths
 }
 
 /// Dense `n × n` matrix products on the current threads: GFLOP/s.
@@ -320,82 +348,91 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(a.threads > 0, "--threads must be at least 1");
     anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
     tch::set_num_threads(a.threads);
+    learner::a2c::gemm::set_threads(a.threads as usize);
     let rollout = a
         .rollout
         .unwrap_or(if a.agent == BenchAgent::Gcp { 16 } else { 60 });
     anyhow::ensure!(rollout > 0, "--rollout must be at least 1");
-    let (mut fast, mut fast_env) = build(&a, fast_path(), rollout)?;
-    let (mut plain, mut plain_env) = build(&a, GradPath::Plain, rollout)?;
+    let paths = measured_paths();
+    let mut learners = paths
+        .iter()
+        .map(|&p| build(&a, p, rollout))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let steps_per_iter = (a.envs * rollout) as u64;
     // Warm-up: one iteration each (allocator, libtorch's kernels).
-    fast.iterate(&mut fast_env)?;
-    plain.iterate(&mut plain_env)?;
-    fast.take_times();
-    plain.take_times();
+    for (l, env) in learners.iter_mut() {
+        l.iterate(env)?;
+        l.take_times();
+    }
 
     const WINDOWS: usize = 3;
-    let window = a.seconds / (2 * WINDOWS) as f64;
-    let (mut fast_rates, mut plain_rates, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut fast_times, mut plain_times) = (PhaseTimes::default(), PhaseTimes::default());
-    let (mut fast_wall, mut plain_wall) = (0.0, 0.0);
-    let (mut fast_steps, mut plain_steps) = (0u64, 0u64);
+    let k = paths.len();
+    let window = a.seconds / (k * WINDOWS) as f64;
+    let mut rates = vec![Vec::new(); k];
+    let mut times = vec![PhaseTimes::default(); k];
+    let mut walls = vec![0.0; k];
+    let mut steps = vec![0u64; k];
     let mut fast_decisions = 0u64;
-    let bar = crate::progress::bar(2 * WINDOWS as u64, "bench learner windows");
+    let bar = crate::progress::bar((k * WINDOWS) as u64, "bench learner windows");
     for _ in 0..WINDOWS {
-        let measure =
-            |l: &mut Learner, env: &mut InProcess| -> anyhow::Result<(f64, f64, u64, u64)> {
-                let start = Instant::now();
-                let (mut steps, mut decisions) = (0, 0);
-                while start.elapsed().as_secs_f64() < window {
-                    decisions += l.iterate(env)?;
-                    steps += steps_per_iter;
-                }
-                let wall = start.elapsed().as_secs_f64();
-                Ok((steps as f64 / wall, wall, steps, decisions))
-            };
-        let (rf, wf, sf, df) = measure(&mut fast, &mut fast_env)?;
-        fast_decisions += df;
-        bar.inc(1);
-        let (rp, wp, sp, _) = measure(&mut plain, &mut plain_env)?;
-        bar.inc(1);
-        fast_times.add(&fast.take_times());
-        plain_times.add(&plain.take_times());
-        fast_wall += wf;
-        plain_wall += wp;
-        fast_steps += sf;
-        plain_steps += sp;
-        fast_rates.push(rf);
-        plain_rates.push(rp);
-        ratios.push(rf / rp);
+        for (i, (l, env)) in learners.iter_mut().enumerate() {
+            let start = Instant::now();
+            let (mut n, mut decisions) = (0, 0);
+            while start.elapsed().as_secs_f64() < window {
+                decisions += l.iterate(env)?;
+                n += steps_per_iter;
+            }
+            let wall = start.elapsed().as_secs_f64();
+            if i == 0 {
+                fast_decisions += decisions;
+            }
+            times[i].add(&l.take_times());
+            walls[i] += wall;
+            steps[i] += n;
+            rates[i].push(n as f64 / wall);
+            bar.inc(1);
+        }
     }
     bar.finish_and_clear();
     let gflops = matmul_gflops(1.0);
-    let figures = |rates: Vec<f64>, t: &PhaseTimes, wall: f64, steps: u64, flops: f64| {
-        let rate = median(rates);
+    let figures = |i: usize| {
+        let rate = median(rates[i].clone());
+        let flops = learners[i].0.flops(paths[i]);
         PathFigures {
             env_steps_per_sec: rate,
-            env_steps: steps,
-            phases: shares(t, wall),
+            env_steps: steps[i],
+            phases: shares(&times[i], walls[i]),
             flops_per_env_step: flops,
             achieved_gflops: flops * rate / 1e9,
         }
     };
-    let fast_fig = figures(
-        fast_rates,
-        &fast_times,
-        fast_wall,
-        fast_steps,
-        fast.flops(fast_path()),
-    );
-    let plain_fig = figures(
-        plain_rates,
-        &plain_times,
-        plain_wall,
-        plain_steps,
-        plain.flops(GradPath::Plain),
-    );
+    // Ratios per window (the paths of one window ran back to back).
+    let ratio = |i: usize, j: usize| {
+        median(
+            rates[i]
+                .iter()
+                .zip(&rates[j])
+                .map(|(a, b)| a / b.max(1e-9))
+                .collect(),
+        )
+    };
+    let index = |p: GradPath| paths.iter().position(|&q| q == p).expect("measured");
+    let (plain_i, per_step_i) = (index(GradPath::Plain), index(GradPath::PerStep));
+    let named: Vec<NamedPath> = (0..k)
+        .map(|i| NamedPath {
+            path: paths[i].name().to_string(),
+            fast: i == 0,
+            figures: figures(i),
+            over_plain: ratio(i, plain_i),
+            over_per_step: ratio(i, per_step_i),
+        })
+        .collect();
+    let fast_fig = figures(0);
+    let plain_fig = figures(plain_i);
+    let speedup = ratio(0, plain_i);
+    let fast = &learners[0].0;
     let (layout, env_cfg) = a.world.build()?;
-    let decisions_per_step = fast_decisions as f64 / fast_steps.max(1) as f64;
+    let decisions_per_step = fast_decisions as f64 / steps[0].max(1) as f64;
     let horizon = (a.agent == BenchAgent::Wn && fast_decisions > 0)
         .then(|| (1.0 / decisions_per_step).round().max(1.0) as usize);
     let (pytorch, pytorch_note) = pytorch_reference(&a, rollout, fast.window_side(), horizon)?;
@@ -412,7 +449,8 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         share_of_bound: fast_fig.achieved_gflops / gflops.max(1e-9),
         fast: fast_fig,
         plain: plain_fig,
-        speedup: median(ratios),
+        speedup,
+        paths: named,
         matmul_gflops: gflops,
         manager_decisions_per_env_step: matches!(a.agent, BenchAgent::Fn | BenchAgent::Wn)
             .then_some(decisions_per_step),
@@ -629,7 +667,7 @@ fn print_table(r: &LearnerBenchReport) {
         r.agent, r.maze, r.task, r.envs, r.rollout, r.threads
     );
     println!(
-        "{:<8} {:>14} {:>9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7} {:>12} {:>9}",
+        "{:<20} {:>11} {:>9} {:>9} {:>7} {:>7} {:>7} {:>9} {:>7} {:>12} {:>9}",
         "path",
         "env-steps/s",
         "step",
@@ -642,10 +680,15 @@ fn print_table(r: &LearnerBenchReport) {
         "FLOP/step",
         "GFLOP/s"
     );
-    for (name, f) in [("fast", &r.fast), ("plain", &r.plain)] {
-        let p = &f.phases;
+    for n in &r.paths {
+        let (f, p) = (&n.figures, &n.figures.phases);
+        let name = if n.fast {
+            format!("{} (fast)", n.path)
+        } else {
+            n.path.clone()
+        };
         println!(
-            "{:<8} {:>14.0} {:>8.1}% {:>8.1}% {:>6.1}% {:>6.1}% {:>6.1}% {:>8.1}% {:>7} {:>12.3e} {:>9.2}",
+            "{:<20} {:>11.0} {:>8.1}% {:>8.1}% {:>6.1}% {:>6.1}% {:>6.1}% {:>8.1}% {:>7} {:>12.3e} {:>9.2}",
             name,
             f.env_steps_per_sec,
             100.0 * p.step,
@@ -659,6 +702,22 @@ fn print_table(r: &LearnerBenchReport) {
             f.achieved_gflops
         );
     }
+    let ratios: Vec<String> = r
+        .paths
+        .iter()
+        .filter(|n| n.path != "plain")
+        .map(|n| format!("{}/plain {:.2}×", n.path, n.over_plain))
+        .chain(
+            r.paths
+                .iter()
+                .filter(|n| n.path != "plain" && n.path != "per-step")
+                .map(|n| format!("{}/per-step {:.2}×", n.path, n.over_per_step)),
+        )
+        .collect();
+    println!(
+        "{} (medians over windows run back to back)",
+        ratios.join(", ")
+    );
     println!(
         "speedup fast/plain {:.2}× (median of paired windows); matmul bound {:.1} GFLOP/s, fast path at {:.1} % of it",
         r.speedup,

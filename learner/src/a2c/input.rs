@@ -301,6 +301,7 @@ impl CellInput {
     /// lies under. The first convolution at a position is the sum of the
     /// kernel columns of its rows (the own kernel of
     /// [`crate::a2c::kernels::FirstConv`]).
+    #[inline(always)]
     pub fn for_each_one(&self, i: usize, mut f: impl FnMut(usize, usize)) {
         let (w, h) = (self.width as i64, self.height as i64);
         let hw = self.width * self.height;

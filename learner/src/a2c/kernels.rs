@@ -28,6 +28,24 @@ const TAPS: usize = 9;
 /// chunk's patches stay in the cache between the GEMMs that read them.
 const CHUNK_ROWS: usize = 1024;
 
+/// Runs `f` compiled for the widest SIMD instruction set the CPU has
+/// (pulp's run-time dispatch: AVX-512 or AVX2 on x86-64), so the kernels'
+/// element-wise loops vectorise past the baseline SSE2 the crate is built
+/// for. What `f` calls must inline into it (`#[inline(always)]`) to share
+/// the instruction set.
+#[inline(always)]
+fn vectorized<R>(f: impl FnOnce() -> R) -> R {
+    struct Op<F>(F);
+    impl<R, F: FnOnce() -> R> pulp::WithSimd for Op<F> {
+        type Output = R;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _: S) -> R {
+            (self.0)()
+        }
+    }
+    pulp::Arch::new().dispatch(Op(f))
+}
+
 /// The channel count of the encoder's convolutions' activations, given
 /// straight-line code in the loops over channel runs.
 const RUN: usize = 16;
@@ -39,9 +57,13 @@ fn add_into(dst: &mut [f32], src: &[f32]) {
         <&mut [f32; RUN]>::try_from(&mut *dst),
         <&[f32; RUN]>::try_from(src),
     ) {
-        for (d, s) in d.iter_mut().zip(s) {
-            *d += s;
+        // Whole loads before the store: the run adds as one vector even
+        // where the compiler cannot rule out that `dst` and `src` overlap.
+        let (mut acc, s) = (*d, *s);
+        for (a, s) in acc.iter_mut().zip(s) {
+            *a += s;
         }
+        *d = acc;
     } else {
         for (d, s) in dst.iter_mut().zip(src) {
             *d += s;
@@ -63,7 +85,7 @@ fn copy_run(dst: &mut [f32], src: &[f32]) {
 }
 
 /// `v = relu(v + bias)` over rows of `bias.len()` columns.
-#[inline]
+#[inline(always)]
 fn bias_relu(y: &mut [f32], bias: &[f32]) {
     for row in y.chunks_exact_mut(bias.len()) {
         for (v, b) in row.iter_mut().zip(bias) {
@@ -75,7 +97,7 @@ fn bias_relu(y: &mut [f32], bias: &[f32]) {
 /// The ReLU's backward as tch's (no gradient where its input was ≤ 0):
 /// zeroes `dy` where the output `y` is 0, and adds the rows of the result
 /// (`width` columns) into the bias gradient `dbias`.
-#[inline]
+#[inline(always)]
 fn relu_backward(dy: &mut [f32], y: &[f32], dbias: &mut [f32]) {
     let width = dbias.len();
     for (drow, yrow) in dy.chunks_exact_mut(width).zip(y.chunks_exact(width)) {
@@ -144,18 +166,23 @@ impl FirstConv {
         bias: &[f32],
         y: &mut [f32],
     ) {
-        debug_assert_eq!(input.channels(), self.channels);
-        let out = self.out;
-        for (j, yi) in y[..n * self.out_len()]
-            .chunks_exact_mut(self.out_len())
-            .enumerate()
-        {
-            yi.fill(0.0);
-            input.for_each_one(first + j, |p, r| {
-                add_into(&mut yi[p * out..][..out], &table[r * out..][..out]);
-            });
-            bias_relu(yi, bias);
-        }
+        vectorized(
+            #[inline(always)]
+            || {
+                debug_assert_eq!(input.channels(), self.channels);
+                let out = self.out;
+                for (j, yi) in y[..n * self.out_len()]
+                    .chunks_exact_mut(self.out_len())
+                    .enumerate()
+                {
+                    yi.fill(0.0);
+                    input.for_each_one(first + j, #[inline(always)] |p, r| {
+                        add_into(&mut yi[p * out..][..out], &table[r * out..][..out]);
+                    });
+                    bias_relu(yi, bias);
+                }
+            },
+        )
     }
 
     /// The backward pass of [`Self::forward`]: `dy` (the gradient of the
@@ -173,14 +200,19 @@ impl FirstConv {
         dtable: &mut [f32],
         dbias: &mut [f32],
     ) {
-        let out = self.out;
-        let dy = &mut dy[..n * self.out_len()];
-        relu_backward(dy, y, dbias);
-        for (j, dzi) in dy.chunks_exact(self.out_len()).enumerate() {
-            input.for_each_one(first + j, |p, r| {
-                add_into(&mut dtable[r * out..][..out], &dzi[p * out..][..out]);
-            });
-        }
+        vectorized(
+            #[inline(always)]
+            || {
+                let out = self.out;
+                let dy = &mut dy[..n * self.out_len()];
+                relu_backward(dy, y, dbias);
+                for (j, dzi) in dy.chunks_exact(self.out_len()).enumerate() {
+                    input.for_each_one(first + j, #[inline(always)] |p, r| {
+                        add_into(&mut dtable[r * out..][..out], &dzi[p * out..][..out]);
+                    });
+                }
+            },
+        )
     }
 }
 
@@ -260,6 +292,7 @@ impl StridedConv {
     }
 
     /// The patches of `n` observations `x` as rows `[n·ho·wo, 9·cin]`.
+    #[inline(always)]
     fn im2col(&self, x: &[f32], n: usize, cols: &mut [f32]) {
         let (h, w, cin) = (self.height, self.width, self.cin);
         let (ho, wo) = self.out_hw();
@@ -288,6 +321,7 @@ impl StridedConv {
 
     /// Adds the patch gradients `dcols` of `n` observations into `dx`
     /// (the transpose of [`Self::im2col`]).
+    #[inline(always)]
     fn col2im_add(&self, dcols: &[f32], n: usize, dx: &mut [f32]) {
         let (h, w, cin) = (self.height, self.width, self.cin);
         let (ho, wo) = self.out_hw();
@@ -329,22 +363,27 @@ impl StridedConv {
         y: &mut [f32],
         scratch: &mut Vec<f32>,
     ) {
-        let (ho, wo) = self.out_hw();
-        let (k, cout) = (TAPS * self.cin, self.cout);
-        let wm = Mat::rows(weight, k, cout);
-        let chunk = self.chunk();
-        scratch.resize(chunk * ho * wo * k, 0.0);
-        let mut start = 0;
-        while start < n {
-            let m = chunk.min(n - start);
-            let rows = m * ho * wo;
-            let cols = &mut scratch[..rows * k];
-            self.im2col(&x[start * self.in_len()..], m, cols);
-            let out = &mut y[start * self.out_len()..][..rows * cout];
-            matmul(out, Mat::rows(cols, rows, k), wm, false);
-            bias_relu(out, bias);
-            start += m;
-        }
+        vectorized(
+            #[inline(always)]
+            || {
+                let (ho, wo) = self.out_hw();
+                let (k, cout) = (TAPS * self.cin, self.cout);
+                let wm = Mat::rows(weight, k, cout);
+                let chunk = self.chunk();
+                scratch.resize(chunk * ho * wo * k, 0.0);
+                let mut start = 0;
+                while start < n {
+                    let m = chunk.min(n - start);
+                    let rows = m * ho * wo;
+                    let cols = &mut scratch[..rows * k];
+                    self.im2col(&x[start * self.in_len()..], m, cols);
+                    let out = &mut y[start * self.out_len()..][..rows * cout];
+                    matmul(out, Mat::rows(cols, rows, k), wm, false);
+                    bias_relu(out, bias);
+                    start += m;
+                }
+            },
+        )
     }
 
     /// The backward pass of [`Self::forward`] over `n` observations: `dy`
@@ -365,29 +404,34 @@ impl StridedConv {
         mut dx: Option<&mut [f32]>,
         scratch: &mut Vec<f32>,
     ) {
-        let (ho, wo) = self.out_hw();
-        let (k, cout) = (TAPS * self.cin, self.cout);
-        relu_backward(&mut dy[..n * self.out_len()], y, dbias);
-        let wm = Mat::rows(weight, k, cout);
-        let chunk = self.chunk();
-        scratch.resize(2 * chunk * ho * wo * k, 0.0);
-        let (cols_buf, dcols_buf) = scratch.split_at_mut(chunk * ho * wo * k);
-        let mut start = 0;
-        while start < n {
-            let m = chunk.min(n - start);
-            let rows = m * ho * wo;
-            let dz = &dy[start * self.out_len()..][..rows * cout];
-            let dz = Mat::rows(dz, rows, cout);
-            let cols = &mut cols_buf[..rows * k];
-            self.im2col(&x[start * self.in_len()..], m, cols);
-            matmul(dweight, Mat::rows(cols, rows, k).t(), dz, true);
-            if let Some(dx) = dx.as_deref_mut() {
-                let dcols = &mut dcols_buf[..rows * k];
-                matmul(dcols, dz, wm.t(), false);
-                self.col2im_add(dcols, m, &mut dx[start * self.in_len()..]);
-            }
-            start += m;
-        }
+        vectorized(
+            #[inline(always)]
+            || {
+                let (ho, wo) = self.out_hw();
+                let (k, cout) = (TAPS * self.cin, self.cout);
+                relu_backward(&mut dy[..n * self.out_len()], y, dbias);
+                let wm = Mat::rows(weight, k, cout);
+                let chunk = self.chunk();
+                scratch.resize(2 * chunk * ho * wo * k, 0.0);
+                let (cols_buf, dcols_buf) = scratch.split_at_mut(chunk * ho * wo * k);
+                let mut start = 0;
+                while start < n {
+                    let m = chunk.min(n - start);
+                    let rows = m * ho * wo;
+                    let dz = &dy[start * self.out_len()..][..rows * cout];
+                    let dz = Mat::rows(dz, rows, cout);
+                    let cols = &mut cols_buf[..rows * k];
+                    self.im2col(&x[start * self.in_len()..], m, cols);
+                    matmul(dweight, Mat::rows(cols, rows, k).t(), dz, true);
+                    if let Some(dx) = dx.as_deref_mut() {
+                        let dcols = &mut dcols_buf[..rows * k];
+                        matmul(dcols, dz, wm.t(), false);
+                        self.col2im_add(dcols, m, &mut dx[start * self.in_len()..]);
+                    }
+                    start += m;
+                }
+            },
+        )
     }
 }
 
@@ -405,10 +449,15 @@ pub struct DenseRelu {
 impl DenseRelu {
     /// `y = relu(x · Wᵀ + b)` for `n` rows.
     pub fn forward(&self, x: &[f32], n: usize, weight: &[f32], bias: &[f32], y: &mut [f32]) {
-        let (k, o) = (self.inputs, self.outputs);
-        let out = &mut y[..n * o];
-        matmul(out, Mat::rows(x, n, k), Mat::rows(weight, o, k).t(), false);
-        bias_relu(out, bias);
+        vectorized(
+            #[inline(always)]
+            || {
+                let (k, o) = (self.inputs, self.outputs);
+                let out = &mut y[..n * o];
+                matmul(out, Mat::rows(x, n, k), Mat::rows(weight, o, k).t(), false);
+                bias_relu(out, bias);
+            },
+        )
     }
 
     /// The backward pass of [`Self::forward`] over `n` rows: `dy` (the
@@ -428,14 +477,19 @@ impl DenseRelu {
         dbias: &mut [f32],
         dx: Option<&mut [f32]>,
     ) {
-        let (k, o) = (self.inputs, self.outputs);
-        let dy = &mut dy[..n * o];
-        relu_backward(dy, y, dbias);
-        let dz = Mat::rows(dy, n, o);
-        matmul(dweight, dz.t(), Mat::rows(x, n, k), true);
-        if let Some(dx) = dx {
-            matmul(dx, dz, Mat::rows(weight, o, k), false);
-        }
+        vectorized(
+            #[inline(always)]
+            || {
+                let (k, o) = (self.inputs, self.outputs);
+                let dy = &mut dy[..n * o];
+                relu_backward(dy, y, dbias);
+                let dz = Mat::rows(dy, n, o);
+                matmul(dweight, dz.t(), Mat::rows(x, n, k), true);
+                if let Some(dx) = dx {
+                    matmul(dx, dz, Mat::rows(weight, o, k), false);
+                }
+            },
+        )
     }
 }
 
