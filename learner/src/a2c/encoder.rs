@@ -207,29 +207,35 @@ impl RustEncoder {
             &mut dbf,
             Some(&mut dy2),
         );
+        // The convolutions chunk by chunk, so that a chunk's input gradient
+        // is still in the cache when the first convolution's backward reads
+        // it.
+        const CHUNK: usize = 32;
         let (mut dw2, mut db2) = (vec![0f32; self.w2.len()], vec![0f32; self.conv.cout]);
-        let mut dy1 = vec![0f32; self.y1.len()];
-        self.conv.backward(
-            &self.y1,
-            n,
-            &self.w2,
-            &self.y2,
-            &mut dy2,
-            &mut dw2,
-            &mut db2,
-            Some(&mut dy1),
-            &mut self.scratch,
-        );
         let (mut dtable, mut db1) = (vec![0f32; self.table.len()], vec![0f32; self.first.out]);
-        self.first.backward(
-            &self.inputs,
-            0,
-            n,
-            &self.y1,
-            &mut dy1,
-            &mut dtable,
-            &mut db1,
-        );
+        let (l1, l2) = (self.first.out_len(), self.conv.out_len());
+        let mut dy1 = vec![0f32; CHUNK.min(n) * l1];
+        let mut start = 0;
+        while start < n {
+            let m = CHUNK.min(n - start);
+            let dy1 = &mut dy1[..m * l1];
+            dy1.fill(0.0);
+            let y1 = &self.y1[start * l1..][..m * l1];
+            self.conv.backward(
+                y1,
+                m,
+                &self.w2,
+                &self.y2[start * l2..][..m * l2],
+                &mut dy2[start * l2..][..m * l2],
+                &mut dw2,
+                &mut db2,
+                Some(&mut *dy1),
+                &mut self.scratch,
+            );
+            self.first
+                .backward(&self.inputs, start, m, y1, dy1, &mut dtable, &mut db1);
+            start += m;
+        }
         // Back to tch's layouts.
         let (inputs, hidden) = (self.fc.inputs, self.fc.outputs);
         let mut dwf_torch = vec![0f32; dwf.len()];

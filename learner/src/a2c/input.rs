@@ -294,52 +294,67 @@ impl CellInput {
         Tensor::from_slice(&buf).view([n as i64, c as i64, self.height as i64, self.width as i64])
     }
 
-    /// Calls `f(position, row)` for every 1 of observation `i`'s dense
-    /// planes under a 3×3 kernel (stride 1, zero padding 1): `position`
-    /// is the output cell `y · width + x`, `row = channel · 9 + tap` the
-    /// input channel and kernel tap (`tap = 3 · (dy + 1) + (dx + 1)`) it
-    /// lies under. The first convolution at a position is the sum of the
-    /// kernel columns of its rows (the own kernel of
+    /// The ones of observation `i`'s dense planes under a 3×3 kernel
+    /// (stride 1, zero padding 1) from its objects and the key, position by
+    /// position: calls `f(position, rows)` for every output cell `position
+    /// = y · width + x` with the table rows `channel · 9 + tap` (`tap = 3 ·
+    /// (dy + 1) + (dx + 1)`) of its inputs (at most 18). With
+    /// [`Self::for_each_mark`], the first convolution at a position is the
+    /// sum of the kernel columns of its rows (the own kernel of
     /// [`crate::a2c::kernels::FirstConv`]).
     #[inline(always)]
-    pub fn for_each_one(&self, i: usize, mut f: impl FnMut(usize, usize)) {
+    pub fn for_each_position(&self, i: usize, mut f: impl FnMut(usize, &[usize])) {
         let (w, h) = (self.width as i64, self.height as i64);
         let hw = self.width * self.height;
         let codes = &self.codes[i * hw..(i + 1) * hw];
         let key = self.keys[i];
+        let mut rows = [0usize; 2 * TAPS];
         for y in 0..h {
             for x in 0..w {
-                let p = (y * w + x) as usize;
+                let mut len = 0;
                 for (k, dy, dx) in CellInput::taps() {
                     let (qy, qx) = (y + dy, x + dx);
                     if (0..h).contains(&qy) && (0..w).contains(&qx) {
-                        f(p, codes[(qy * w + qx) as usize] as usize * TAPS + k);
+                        rows[len] = codes[(qy * w + qx) as usize] as usize * TAPS + k;
+                        len += 1;
                         if key {
-                            f(p, KEY_CHANNEL * TAPS + k);
+                            rows[len] = KEY_CHANNEL * TAPS + k;
+                            len += 1;
                         }
                     }
                 }
+                f((y * w + x) as usize, &rows[..len]);
             }
         }
-        let mut mark = |q: u32, channel: usize| {
+    }
+
+    /// The rest of [`Self::for_each_position`]'s ones: calls
+    /// `mark(position, row)` for each input the agent's and the goals'
+    /// planes put under the kernel at `position` (nine or fewer per marked
+    /// cell).
+    #[inline(always)]
+    pub fn for_each_mark(&self, i: usize, mut mark: impl FnMut(usize, usize)) {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let hw = self.width * self.height;
+        let mut marks = |q: u32, channel: usize| {
             let (qy, qx) = (i64::from(q) / w, i64::from(q) % w);
             for (k, dy, dx) in CellInput::taps() {
                 let (py, px) = (qy - dy, qx - dx);
                 if (0..h).contains(&py) && (0..w).contains(&px) {
-                    f((py * w + px) as usize, channel * TAPS + k);
+                    mark((py * w + px) as usize, channel * TAPS + k);
                 }
             }
         };
         let (agent, dir) = self.agents[i];
         if agent != u32::MAX {
-            mark(agent, OBJECT_CHANNELS + dir as usize);
+            marks(agent, OBJECT_CHANNELS + dir as usize);
         }
         for (k, &g) in self.goals[i * self.slots..(i + 1) * self.slots]
             .iter()
             .enumerate()
         {
             if (g as usize) < hw {
-                mark(g, GOAL_CHANNEL + k);
+                marks(g, GOAL_CHANNEL + k);
             }
         }
     }

@@ -6,7 +6,7 @@
 //!
 //! - [`FirstConv`]: the first convolution over the one-hot planes as a sum
 //!   of kernel columns, one per input that is 1 under the kernel
-//!   ([`CellInput::for_each_one`]); its backward adds the output gradient
+//!   ([`CellInput::for_each_position`], [`CellInput::for_each_mark`]); its backward adds the output gradient
 //!   into the same columns.
 //! - [`StridedConv`]: the stride-2 convolution as an im2col into a buffer
 //!   and one GEMM per chunk of observations; its backward is
@@ -175,10 +175,36 @@ impl FirstConv {
                     .chunks_exact_mut(self.out_len())
                     .enumerate()
                 {
-                    yi.fill(0.0);
-                    input.for_each_one(first + j, #[inline(always)] |p, r| {
-                        add_into(&mut yi[p * out..][..out], &table[r * out..][..out]);
-                    });
+                    // Each position's sum in registers, stored once.
+                    input.for_each_position(
+                        first + j,
+                        #[inline(always)]
+                        |p, rows| {
+                            let dst = &mut yi[p * out..][..out];
+                            if let Ok(dst) = <&mut [f32; RUN]>::try_from(&mut *dst) {
+                                let mut acc = [0f32; RUN];
+                                for &r in rows {
+                                    let row: &[f32; RUN] = table[r * RUN..][..RUN]
+                                        .try_into()
+                                        .expect("invariant: a run of RUN floats");
+                                    for (a, v) in acc.iter_mut().zip(row) {
+                                        *a += v;
+                                    }
+                                }
+                                *dst = acc;
+                            } else {
+                                dst.fill(0.0);
+                                for &r in rows {
+                                    add_into(dst, &table[r * out..][..out]);
+                                }
+                            }
+                        },
+                    );
+                    input.for_each_mark(
+                        first + j,
+                        #[inline(always)]
+                        |p, r| add_into(&mut yi[p * out..][..out], &table[r * out..][..out]),
+                    );
                     bias_relu(yi, bias);
                 }
             },
@@ -206,10 +232,36 @@ impl FirstConv {
                 let out = self.out;
                 let dy = &mut dy[..n * self.out_len()];
                 relu_backward(dy, y, dbias);
+                // Consecutive positions add into the same rows (a floor
+                // cell's under every tap); spreading them over a few copies
+                // of the table keeps those adds from waiting on each other.
+                const COPIES: usize = 4;
+                let len = dtable.len();
+                let mut copies = vec![0f32; COPIES * len];
                 for (j, dzi) in dy.chunks_exact(self.out_len()).enumerate() {
-                    input.for_each_one(first + j, #[inline(always)] |p, r| {
-                        add_into(&mut dtable[r * out..][..out], &dzi[p * out..][..out]);
-                    });
+                    input.for_each_position(
+                        first + j,
+                        #[inline(always)]
+                        |p, rows| {
+                            let dt = &mut copies[(p % COPIES) * len..][..len];
+                            let g = &dzi[p * out..][..out];
+                            for &r in rows {
+                                add_into(&mut dt[r * out..][..out], g);
+                            }
+                        },
+                    );
+                    input.for_each_mark(
+                        first + j,
+                        #[inline(always)]
+                        |p, r| {
+                            add_into(&mut copies[r * out..][..out], &dzi[p * out..][..out]);
+                        },
+                    );
+                }
+                for copy in copies.chunks_exact(len) {
+                    for (d, c) in dtable.iter_mut().zip(copy) {
+                        *d += c;
+                    }
                 }
             },
         )
