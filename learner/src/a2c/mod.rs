@@ -17,12 +17,13 @@
 //!   transition (`γ` for one env step, `γ^k` for a Manager interval of `k`
 //!   steps);
 //! - [`rollout`]: rollout storage `[T, B]` with the bootstrap values, and
-//!   the update, by default through every step's autograd graph (with the
-//!   gather-and-sum first layer); the alternative, acting under `no_grad`
-//!   and recomputing the encoder for all `T·B` observations in one batched
-//!   call before unrolling the LSTM over the stored features (CleanRL's
-//!   PPO-LSTM layout), gives the same gradients and is kept for
-//!   `worldgraph bench learner`;
+//!   the update, by default through every step's autograd graph over the
+//!   own encoder's features ([`encoder`]), else over the whole network in
+//!   tch (with the gather-and-sum first layer); the alternative, acting
+//!   under `no_grad` and recomputing the encoder for all `T·B`
+//!   observations in one batched call before unrolling the LSTM over the
+//!   stored features (CleanRL's PPO-LSTM layout), gives the same gradients
+//!   and is kept for `worldgraph bench learner`;
 //! - [`a2c_loss`]: `L = L_π + c_V · L_V − c_H · H` over weighted entries.
 
 pub mod encoder;

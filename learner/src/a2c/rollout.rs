@@ -12,20 +12,22 @@
 //!   LSTM over the stored features from the stored initial state (resetting
 //!   where an episode ended), and applies the heads to all `T·B` core
 //!   outputs at once;
-//! - [`GradPath::PerStep`] (the default): each step runs the network with
-//!   autograd (first layer by gather-and-sum) and keeps its logits and
-//!   value; the update back-propagates through those graphs;
+//! - [`GradPath::PerStep`]: each step runs the network with autograd
+//!   (first layer by gather-and-sum) and keeps its logits and value; the
+//!   update back-propagates through those graphs;
 //! - [`GradPath::Plain`]: the same with the dense first convolution over
 //!   one-hot planes (the benchmark's baseline);
-//! - [`GradPath::RustEncoder`]: the encoder in the project's own kernels
-//!   outside the graph, each step's features a leaf of its graph, the
-//!   encoder's backward run once over the whole rollout
-//!   ([`crate::a2c::encoder`]).
+//! - [`GradPath::RustEncoder`] (the default): the encoder in the project's
+//!   own kernels outside the graph, each step's features a leaf of its
+//!   graph (the core and heads), the encoder's backward run once over the
+//!   whole rollout ([`crate::a2c::encoder`]).
 //!
 //! All four give the same loss and gradients for the same rollout (tests
 //! check it). Which is fastest is measured by `worldgraph bench learner`:
 //! with these small networks on a CPU the update is compute-bound, so the
-//! recomputation's second forward pass costs more than batching saves.
+//! recomputation's second forward pass costs more than batching saves,
+//! and the own kernels' GEMM outruns libtorch's at these shapes
+//! (`docs/implementation_details.md`, "Learner throughput").
 
 use tch::{Kind, Tensor, nn};
 
@@ -75,15 +77,16 @@ impl GradPath {
 }
 
 impl Default for GradPath {
-    /// [`GradPath::PerStep`], or the path `WORLDGRAPH_GRAD_PATH` names (read
-    /// once per process).
+    /// [`GradPath::RustEncoder`] (measured fastest on the A2C baseline and
+    /// the Wide-then-Narrow Worker, `worldgraph bench learner`), or the
+    /// path `WORLDGRAPH_GRAD_PATH` names (read once per process).
     fn default() -> GradPath {
         static PATH: std::sync::OnceLock<GradPath> = std::sync::OnceLock::new();
         *PATH.get_or_init(|| {
             std::env::var("WORLDGRAPH_GRAD_PATH")
                 .ok()
                 .and_then(|v| GradPath::from_name(&v))
-                .unwrap_or(GradPath::PerStep)
+                .unwrap_or(GradPath::RustEncoder)
         })
     }
 }
