@@ -68,6 +68,9 @@ pub struct BenchLearnerArgs {
     /// libtorch intra-op threads (the simulator runs on one thread).
     #[arg(long, default_value_t = 2)]
     pub threads: i32,
+    /// Threads of the own kernels' GEMMs (rayon) [default: --threads].
+    #[arg(long)]
+    pub kernel_threads: Option<usize>,
     /// Seconds of measurement in total, split into alternating windows of
     /// the fast and the plain path (the PyTorch reference then gets as
     /// many, split among its variants).
@@ -348,7 +351,7 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(a.threads > 0, "--threads must be at least 1");
     anyhow::ensure!(a.seconds > 0.0, "--seconds must be positive");
     tch::set_num_threads(a.threads);
-    learner::a2c::gemm::set_threads(a.threads as usize);
+    learner::a2c::gemm::set_threads(a.kernel_threads.unwrap_or(a.threads as usize));
     let rollout = a
         .rollout
         .unwrap_or(if a.agent == BenchAgent::Gcp { 16 } else { 60 });
