@@ -138,10 +138,10 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut v: serde_json::Value = serde_json::from_slice(&bytes)
         .with_context(|| format!("{} is not a run summary", path.display()))?;
-    // A summary written before the Manager's goal map or the Worker's
-    // booking of the task's end existed ran without the one and with the
-    // terminal booking: its recorded agent settings say so, not today's
-    // defaults.
+    // A summary written before the Manager's goal map, its windows or the
+    // Worker's booking of the task's end existed ran without the first two
+    // and with the terminal booking: its recorded agent settings say so,
+    // not today's defaults.
     if let Some(agent) = v
         .get_mut("train_config")
         .and_then(|t| t.get_mut("agent"))
@@ -149,6 +149,9 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
     {
         agent
             .entry("goal_map")
+            .or_insert(serde_json::Value::Bool(false));
+        agent
+            .entry("goal_map_windows")
             .or_insert(serde_json::Value::Bool(false));
         agent
             .entry("worker_task_end")

@@ -28,7 +28,7 @@
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
-use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead};
+use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead, Window};
 use crate::a2c::input::CellInput;
 use crate::a2c::net::{LstmState, Trunk};
 use crate::a2c::rollout::floats;
@@ -118,12 +118,43 @@ pub struct DecisionQueue {
 /// output must learn each ball-to-goal mapping separately. The last layer
 /// starts at zero: an untrained map leaves the head's distribution as it
 /// is.
+///
+/// For WN the map reaches both of the Manager's choices when it is given
+/// the windows of `V` ([`GoalMap::with_windows`]): `π^n`'s logit of a window
+/// cell gains the map's logit of that cell, and `π^ω`'s logit of a wide
+/// goal gains the log-sum-exp of the map over its window, the log of the
+/// mass its narrow goals would add. Without windows `π^ω` reads the map at
+/// the candidates' own cells only and `π^n` not at all, so "a ball lies in
+/// this window" reaches neither choice.
 #[derive(Debug)]
 pub struct GoalMap {
     conv1: nn::Conv2D,
     conv2: nn::Conv2D,
     /// WN: the cells of `V`, whose logits `π^ω` reads; FN: every cell.
     cells: Option<Tensor>,
+    /// WN with windows: the cells of each candidate's window.
+    windows: Option<WindowCells>,
+}
+
+/// The cells of every candidate's window, `[|V|, N·N]` (slots outside the
+/// grid or on a wall are masked).
+#[derive(Debug)]
+struct WindowCells {
+    /// Cell indices, 0 at masked slots.
+    cells: Tensor,
+    /// Which slots are valid narrow goals.
+    valid: Tensor,
+}
+
+/// The goal map's logits for one batch of Manager decisions.
+#[derive(Debug)]
+pub struct GoalBias {
+    /// Added to the goal head: FN's cells `[N, H·W]` or `π^ω`'s candidates
+    /// `[N, |V|]`.
+    pub wide: Tensor,
+    /// WN with windows: the map at every candidate's window cells, `[N,
+    /// |V|, N·N]`, for `π^n` ([`WideNarrowHead::narrow_bias`]).
+    pub windows: Option<Tensor>,
 }
 
 impl GoalMap {
@@ -146,7 +177,28 @@ impl GoalMap {
             conv2: nn::conv2d(p / "conv2", channels, 1, 3, zero),
             cells: cells
                 .map(|c| Tensor::from_slice(&c.iter().map(|&x| i64::from(x)).collect::<Vec<_>>())),
+            windows: None,
         }
+    }
+
+    /// The map over the windows of `candidates` too (WN, type docs): `π^ω`
+    /// reads each window's log-sum-exp, `π^n` each window cell.
+    pub fn with_windows(mut self, window: &Window, candidates: &[u32]) -> GoalMap {
+        let mut cells = Vec::with_capacity(candidates.len() * window.len());
+        let mut valid = Vec::with_capacity(candidates.len() * window.len());
+        for &centre in candidates {
+            let ok = window.valid(centre);
+            for (k, &v) in ok.iter().enumerate() {
+                cells.push(window.cell(centre, k).map_or(0, i64::from));
+                valid.push(v);
+            }
+        }
+        let rows = candidates.len() as i64;
+        self.windows = Some(WindowCells {
+            cells: Tensor::from_slice(&cells).view([rows, -1]),
+            valid: Tensor::from_slice(&valid).view([rows, -1]),
+        });
+        self
     }
 
     /// The logits `[N, cells]` of the observations `input`.
@@ -156,14 +208,35 @@ impl GoalMap {
 
     /// The logits `[N, cells]` of dense one-hot planes `[N, C, H, W]`.
     pub fn logits_dense(&self, planes: &Tensor) -> Tensor {
+        self.bias_dense(planes).wide
+    }
+
+    /// The map's logits for the goal head of dense one-hot planes `[N, C,
+    /// H, W]` (type docs).
+    pub fn bias_dense(&self, planes: &Tensor) -> GoalBias {
         let map = planes
             .apply(&self.conv1)
             .relu()
             .apply(&self.conv2)
             .flatten(1, -1);
-        match &self.cells {
+        if let Some(w) = &self.windows {
+            let (n, rows) = (map.size()[0], w.cells.size()[0]);
+            let at = map
+                .index_select(1, &w.cells.view([-1]))
+                .view([n, rows, -1]);
+            let masked = at.masked_fill(&w.valid.logical_not().unsqueeze(0), -1e9);
+            return GoalBias {
+                wide: masked.logsumexp([2], false),
+                windows: Some(at),
+            };
+        }
+        let wide = match &self.cells {
             Some(c) => map.index_select(1, c),
             None => map,
+        };
+        GoalBias {
+            wide,
+            windows: None,
         }
     }
 }
@@ -201,16 +274,30 @@ impl Manager {
     /// The Manager with a goal map under `p / "goal_map"` (the cells of `V`
     /// for WN, every cell for FN); created after the rest, so the other
     /// weights are those of a Manager without one.
-    pub fn with_goal_map(mut self, p: &nn::Path, channels: i64, cells: Option<&[u32]>) -> Manager {
+    /// For WN, `windows` extends the map over the windows of `V` to `π^n`
+    /// ([`GoalMap::with_windows`]).
+    pub fn with_goal_map(
+        mut self,
+        p: &nn::Path,
+        channels: i64,
+        cells: Option<&[u32]>,
+        windows: Option<&Window>,
+    ) -> Manager {
         let planes = self.trunk.in_channels();
-        self.goal_map = Some(GoalMap::new(&(p / "goal_map"), planes, channels, cells));
+        let map = GoalMap::new(&(p / "goal_map"), planes, channels, cells);
+        self.goal_map = Some(match (windows, cells) {
+            (Some(w), Some(v)) => map.with_windows(w, v),
+            _ => map,
+        });
         self
     }
 
-    /// The goal map's logits `[N, goals]` of `input` (`None` without a
-    /// map), with gradient unless under `no_grad`.
-    pub fn goal_bias(&self, input: &CellInput) -> Option<Tensor> {
-        self.goal_map.as_ref().map(|m| m.logits(input))
+    /// The goal map's logits of `input` (`None` without a map), with
+    /// gradient unless under `no_grad`.
+    pub fn goal_bias(&self, input: &CellInput) -> Option<GoalBias> {
+        self.goal_map
+            .as_ref()
+            .map(|m| m.bias_dense(&input.to_dense()))
     }
 
     /// The FN head over a `width × height` grid with `valid` subgoal cells.
@@ -363,12 +450,15 @@ impl Manager {
         let bias = self.goal_bias(&input);
         let (log_prob, entropy) = match &self.head {
             ManagerHead::Feudal { .. } => {
-                let pi = self.feudal_policy(&h, bias.as_ref()).expect("feudal head");
+                let pi = self
+                    .feudal_policy(&h, bias.as_ref().map(|b| &b.wide))
+                    .expect("feudal head");
                 (pi.log_prob(&Tensor::from_slice(&wide)), pi.entropy())
             }
             ManagerHead::WideNarrow(head) => head.terms(
                 &h,
-                bias.as_ref(),
+                bias.as_ref().map(|b| &b.wide),
+                bias.as_ref().and_then(|b| b.windows.as_ref()),
                 &Tensor::from_slice(&local).view([k * bb, -1]),
                 &Tensor::from_slice(&valid).view([k * bb, -1]),
                 &Tensor::from_slice(&wide),
@@ -511,6 +601,67 @@ mod tests {
             "the ball's cell elsewhere has probability {p}, uniform {}",
             1.0 / (w * h) as f64
         );
+    }
+
+    /// With the windows of `V`, a ball near a wide goal (not on it) draws
+    /// `π^ω` to that goal and `π^n` to the ball's slot: the map trained to
+    /// name a ball at one place, then a ball elsewhere, in the window of
+    /// one candidate of three.
+    #[test]
+    fn the_map_over_windows_points_both_choices_at_a_ball_beside_a_wide_goal() {
+        let (w, h) = (13i64, 13i64);
+        let layout = sim::Layout::parse(
+            "open",
+            &(0..h)
+                .map(|y| {
+                    (0..w)
+                        .map(|x| match (x, y) {
+                            (0, _) | (_, 0) => '#',
+                            _ if x == w - 1 || y == h - 1 => '#',
+                            (1, 1) => '>',
+                            (1, 11) => 'E',
+                            _ => '.',
+                        })
+                        .collect::<String>()
+                })
+                .collect::<Vec<_>>()
+                .join("\n"),
+        )
+        .expect("an open room");
+        let window = Window::new(5, &layout);
+        let cell = |x: i64, y: i64| (y * w + x) as u32;
+        let candidates = [cell(3, 3), cell(9, 8), cell(3, 9)];
+        let vs = nn::VarStore::new(Device::Cpu);
+        let map = crate::seeding::init_seeded(3, || {
+            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
+        });
+        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        for _ in 0..60 {
+            let logp = map
+                .logits_dense(&ball_at(w, h, 2, 2))
+                .log_softmax(-1, Kind::Float);
+            opt.backward_step(&(-logp.get(0).get(i64::from(cell(2, 2)))));
+        }
+        let map = map.with_windows(&window, &candidates);
+        // The ball two cells right and one down of the second candidate.
+        let bias = map.bias_dense(&ball_at(w, h, 11, 9));
+        assert_eq!(bias.wide.size(), [1, 3]);
+        assert_eq!(bias.wide.get(0).argmax(0, false).int64_value(&[]), 1);
+        let windows = bias.windows.expect("windows");
+        let narrow = WideNarrowHead::narrow_bias(&windows, &Tensor::from_slice(&[1i64]));
+        let ball_slot = window.slot_of(candidates[1], cell(11, 9)).expect("in the window");
+        assert_eq!(
+            narrow.get(0).argmax(0, false).int64_value(&[]),
+            ball_slot as i64
+        );
+        // π^ω's logit is the log-sum-exp of π^n's over the valid slots.
+        let valid = window.valid(candidates[1]);
+        let lse = (0..window.len())
+            .filter(|&k| valid[k])
+            .map(|k| narrow.get(0).get(k as i64).double_value(&[]).exp())
+            .sum::<f64>()
+            .ln();
+        assert!((bias.wide.get(0).get(1).double_value(&[]) - lse).abs() < 1e-4);
     }
 
     #[test]

@@ -143,6 +143,11 @@ pub struct AgentConfig {
     /// The Manager's goal map ([`feudal::GoalMap`]): a fully convolutional
     /// logit per cell added to its goal head's (FN, WN).
     pub goal_map: bool,
+    /// WN: the goal map reaches `π^n` over the window of `g_w`, and `π^ω`
+    /// through the log-sum-exp of the map over each candidate's window
+    /// ([`feudal::GoalMap::with_windows`]); off, `π^ω` reads the map at the
+    /// candidates' own cells only (the behaviour until this was added).
+    pub goal_map_windows: bool,
     /// How the Worker books a step on which the task ended the episode
     /// before it reached `g_n` ([`worker::WorkerTaskEnd`]).
     pub worker_task_end: WorkerTaskEnd,
@@ -168,6 +173,7 @@ impl Default for AgentConfig {
             fine_tune_pi_g: true,
             hand_over: HandOver::default(),
             goal_map: true,
+            goal_map_windows: true,
             worker_task_end: WorkerTaskEnd::default(),
         }
     }
@@ -532,7 +538,13 @@ impl HrlAgent {
                 });
                 let m = if cfg.goal_map {
                     let cells = (cfg.kind == AgentKind::WideNarrow).then_some(&candidates[..]);
-                    m.with_goal_map(&vs.root(), (cfg.conv_channels[0] / 2).max(1), cells)
+                    let windows = window.as_ref().filter(|_| cfg.goal_map_windows);
+                    m.with_goal_map(
+                        &vs.root(),
+                        (cfg.conv_channels[0] / 2).max(1),
+                        cells,
+                        windows,
+                    )
                 } else {
                     m
                 };
@@ -905,7 +917,9 @@ impl HrlAgent {
         let mut picks: Vec<Pick> = Vec::with_capacity(who.len());
         match manager.head() {
             ManagerHead::Feudal { .. } => {
-                let pi = manager.feudal_policy(&h, bias.as_ref()).expect("feudal");
+                let pi = manager
+                    .feudal_policy(&h, bias.as_ref().map(|b| &b.wide))
+                    .expect("feudal");
                 for cell in crate::seeding::sample_index(&mut ctl.rng, &pi.probs()) {
                     picks.push((
                         cell as i64,
@@ -921,7 +935,7 @@ impl HrlAgent {
                 let window = self.window.as_ref().expect("WN has a window");
                 let wide = crate::seeding::sample_index(
                     &mut ctl.rng,
-                    &head.wide(&h, bias.as_ref()).probs(),
+                    &head.wide(&h, bias.as_ref().map(|b| &b.wide)).probs(),
                 );
                 let mut locals = Vec::new();
                 let mut valids = Vec::new();
@@ -944,9 +958,15 @@ impl HrlAgent {
                 let wide_idx =
                     Tensor::from_slice(&wide.iter().map(|&k| k as i64).collect::<Vec<_>>());
                 let narrow = tch::no_grad(|| {
+                    let map = bias
+                        .as_ref()
+                        .and_then(|b| b.windows.as_ref())
+                        .map(|w| WideNarrowHead::narrow_bias(w, &wide_idx));
                     crate::seeding::sample_index(
                         &mut ctl.rng,
-                        &head.narrow(&h, &wide_idx, &local, &valid).probs(),
+                        &head
+                            .narrow(&h, &wide_idx, &local, &valid, map.as_ref())
+                            .probs(),
                     )
                 });
                 for j in 0..who.len() {
