@@ -169,13 +169,19 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
 }
 
 /// Every run summary under `root` (discovery summaries are skipped),
-/// sorted by path. Two summaries of the same run (configuration, maze, task
-/// and seed), such as a copy under another name or folder, are refused
-/// naming both files: each would count as a seed of its cell.
-pub fn read_all_runs(root: &Path) -> anyhow::Result<Vec<RunResult>> {
+/// sorted by path, and the other result sets nested under it, which are not
+/// read: a folder below `root` with a maze's folder of its own
+/// (`results/goal-map/small/...` under `results/`) is a grid's results at
+/// its own budget, and a table never mixes budgets. Two summaries of the
+/// same run (configuration, maze, task and seed), such as a copy under
+/// another name or folder, are refused naming both files: each would count
+/// as a seed of its cell.
+pub fn read_all_runs(root: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf>)> {
     let mut files = Vec::new();
-    collect(root, &mut files)?;
+    let mut nested = Vec::new();
+    collect(root, true, &mut files, &mut nested)?;
     files.sort();
+    nested.sort();
     let mut seen: std::collections::BTreeMap<(String, String, String, u64), &Path> =
         std::collections::BTreeMap::new();
     let mut runs = Vec::new();
@@ -199,16 +205,25 @@ pub fn read_all_runs(root: &Path) -> anyhow::Result<Vec<RunResult>> {
         }
         runs.push(r);
     }
-    Ok(runs)
+    Ok((runs, nested))
 }
 
-fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+fn collect(
+    dir: &Path,
+    root: bool,
+    out: &mut Vec<PathBuf>,
+    nested: &mut Vec<PathBuf>,
+) -> anyhow::Result<()> {
+    if !root && is_result_set(dir) {
+        nested.push(dir.to_path_buf());
+        return Ok(());
+    }
     let entries =
         std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
     for e in entries {
         let p = e?.path();
         if p.is_dir() {
-            collect(&p, out)?;
+            collect(&p, false, out, nested)?;
         } else if p
             .file_name()
             .and_then(|n| n.to_str())
@@ -218,6 +233,12 @@ fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Whether `dir` holds a result set of its own: a folder named after a
+/// maze (`<dir>/small/`, ...).
+fn is_result_set(dir: &Path) -> bool {
+    sim::Maze::ALL.iter().any(|m| dir.join(m.name()).is_dir())
 }
 
 /// The commit the binary was built from (`+dirty` when tracked files had

@@ -221,9 +221,7 @@ impl GoalMap {
             .flatten(1, -1);
         if let Some(w) = &self.windows {
             let (n, rows) = (map.size()[0], w.cells.size()[0]);
-            let at = map
-                .index_select(1, &w.cells.view([-1]))
-                .view([n, rows, -1]);
+            let at = map.index_select(1, &w.cells.view([-1])).view([n, rows, -1]);
             let masked = at.masked_fill(&w.valid.logical_not().unsqueeze(0), -1e9);
             return GoalBias {
                 wide: masked.logsumexp([2], false),
@@ -649,7 +647,9 @@ mod tests {
         assert_eq!(bias.wide.get(0).argmax(0, false).int64_value(&[]), 1);
         let windows = bias.windows.expect("windows");
         let narrow = WideNarrowHead::narrow_bias(&windows, &Tensor::from_slice(&[1i64]));
-        let ball_slot = window.slot_of(candidates[1], cell(11, 9)).expect("in the window");
+        let ball_slot = window
+            .slot_of(candidates[1], cell(11, 9))
+            .expect("in the window");
         assert_eq!(
             narrow.get(0).argmax(0, false).int64_value(&[]),
             ball_slot as i64
