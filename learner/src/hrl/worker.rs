@@ -16,8 +16,10 @@
 //! limit (truncation) is bootstrapped from its final state
 //! ([`WorkerStep::bootstrap`]). Handing over to a world-graph traversal
 //! towards `g_w` also ends the goal episode, by default paid as reaching
-//! `g_w` (the route brings the agent there; [`super::HandOver`]); the
-//! Worker resumes at `g_w` with a fresh goal episode for `g_n`.
+//! `g_w` (the route brings the agent there; [`HandOver`](super::config::HandOver)); the Worker
+//! resumes at `g_w` with a fresh goal episode for `g_n`.
+
+use super::config::WorkerTaskEnd;
 
 /// How the environment's episode stands after a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,26 +48,6 @@ impl EpisodeEnd {
     pub fn ended(self) -> bool {
         self != EpisodeEnd::Running
     }
-}
-
-/// How the Worker books a step on which the task ended the environment's
-/// episode (the exit, lava) before it reached `g_n`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum WorkerTaskEnd {
-    /// As the end of its goal episode with nothing more to earn. The
-    /// Worker is paid only for its goals, so it learns to keep off every
-    /// cell that ends the episode unless it is `g_n`: it walks around the
-    /// exit, and once the Manager has learnt to collect the balls without
-    /// naming the exit, no episode exits again and the Manager never
-    /// learns that the exit pays.
-    Terminal,
-    /// As a cut, like the step limit's: bootstrapped from the Worker's
-    /// value of the final state. The episode's end is the Manager's
-    /// affair (its reward, its termination); to the Worker the exit is a
-    /// cell like any other, neither a goal nor a trap.
-    #[default]
-    Cut,
 }
 
 /// The Worker's goals in one environment's current interval.
