@@ -26,6 +26,7 @@ pub mod a2c;
 pub mod config;
 pub mod feudal;
 pub mod init;
+pub mod stats;
 pub mod steering;
 pub mod traversal;
 pub mod wide_narrow;
@@ -49,6 +50,8 @@ use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
 pub use config::{AgentConfig, AgentKind, Candidates, HandOver, WorkerTaskEnd, WorldGraphInputs};
 use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
+use stats::{Decisions, StepCounts};
+pub use stats::{EpisodeTrace, EvalResult, IterationStats};
 use steering::{Leg, Steering};
 use traversal::{Execution, Progress, Traversal};
 use wide_narrow::{WideNarrowHead, Window};
@@ -84,75 +87,6 @@ struct ControllerRecord {
     envs: Vec<EnvCtl>,
     queues: Vec<DecisionQueue>,
     rng: RngState,
-}
-
-/// What one iteration measured.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct IterationStats {
-    /// Env steps of the iteration.
-    pub env_steps: u64,
-    /// Episodes that ended.
-    pub episodes: usize,
-    /// Mean return of those episodes (0 when none).
-    pub mean_return: f64,
-    /// The Worker's (or the baseline's) loss.
-    pub worker: LossFigures,
-    /// The Manager's loss (zeros for A2C).
-    pub manager: LossFigures,
-    /// Manager intervals that ended (FN, WN).
-    pub intervals: usize,
-    /// Share of those in which the Worker reached `g_n`.
-    pub goals_reached: f64,
-    /// Share of env steps taken by graph traversal.
-    pub traversal_share: f64,
-    /// Share of the episodes that ended by reaching the exit.
-    pub exit_share: f64,
-    /// Manager decisions made (FN, WN).
-    pub decisions: usize,
-    /// Share of those whose narrow goal `g_n` is the exit.
-    pub exit_goal_share: f64,
-    /// Share of those whose narrow goal `g_n` held a ball when named.
-    pub ball_goal_share: f64,
-}
-
-/// The result of an evaluation: one episode per environment.
-#[derive(Debug, Clone, Serialize)]
-pub struct EvalResult {
-    /// Mean return (MultiGoal tasks) or success rate (Door-Key).
-    pub score: f64,
-    /// Mean episode return.
-    pub mean_return: f64,
-    /// Share of episodes that reached the exit.
-    pub success_rate: f64,
-    /// Episode returns, by environment.
-    pub returns: Vec<f32>,
-    /// Episode lengths.
-    pub lengths: Vec<u32>,
-    /// Share of steps taken by traversal.
-    pub traversal_share: f64,
-}
-
-/// One evaluation episode, for the picture of the paper's Figure 1.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub struct EpisodeTrace {
-    /// The agent's cell before the first step and after each (after the
-    /// last, the cell the episode ended on).
-    pub cells: Vec<u32>,
-    /// Whether each step was taken by traversal.
-    pub traversed: Vec<bool>,
-    /// Manager decisions: `(step, g_w, g_n)`.
-    pub goals: Vec<(u32, u32, u32)>,
-    /// The episode's return.
-    pub episode_return: f32,
-    /// The grid the episode started on (row-major object codes, as
-    /// `sim::Object`): its balls, key, doors, exit.
-    #[serde(default)]
-    pub start_cells: Vec<u8>,
-    /// The grid the episode ended on (the step record's final cells of the
-    /// step that ended it): a ball of `start_cells` missing here was
-    /// collected. Empty when the transport carries no final cells.
-    #[serde(default)]
-    pub end_cells: Vec<u8>,
 }
 
 /// A stage 2 agent (module docs).
@@ -1382,39 +1316,6 @@ fn steer_targets(ctl: &Controller) -> (Vec<u32>, Vec<bool>) {
 /// One Manager choice: the wide and narrow indices as trained, the goal
 /// cells, and (WN) the local input and valid slots of the window.
 type Pick = (i64, i64, u32, u32, Vec<f32>, Vec<bool>);
-
-/// Counts of one rollout or evaluation.
-#[derive(Debug, Default)]
-struct StepCounts {
-    steps: u64,
-    episodes: usize,
-    returns: f64,
-    successes: usize,
-    intervals: usize,
-    reached: usize,
-    traversal_steps: u64,
-    decisions: usize,
-    exit_goals: usize,
-    ball_goals: usize,
-}
-
-impl StepCounts {
-    fn add(&mut self, d: Decisions) {
-        self.decisions += d.count;
-        self.exit_goals += d.exit_goals;
-        self.ball_goals += d.ball_goals;
-    }
-}
-
-/// The Manager's decisions of one call of [`HrlAgent::decide`].
-#[derive(Debug, Default, Clone, Copy)]
-struct Decisions {
-    count: usize,
-    /// Decisions whose narrow goal `g_n` is an exit cell.
-    exit_goals: usize,
-    /// Decisions whose narrow goal `g_n` holds a ball.
-    ball_goals: usize,
-}
 
 #[cfg(test)]
 mod tests {
