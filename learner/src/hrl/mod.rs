@@ -579,7 +579,8 @@ impl HrlAgent {
             .expect("a Manager has a core state")
             .select(&idx)
             .reset_done(&mask(&resets));
-        let (next, values, h) = manager.act(&input, &state);
+        let step = manager.act(&input, &state);
+        let (next, values, h) = (step.state, step.values, step.h);
         let bias = tch::no_grad(|| manager.goal_bias(&input));
         ctl.manager_state
             .as_mut()
@@ -1052,19 +1053,19 @@ impl HrlAgent {
         let mut manager_figures = LossFigures::default();
         if let (Some(m), Some(opt)) = (&self.manager, self.manager_opt.as_mut()) {
             let init = ctl.manager_init.take().expect("Manager init state");
-            let (loss, figures, next) = m.loss(
+            let l = m.loss(
                 &ctl.queues,
                 &init,
                 &self.cfg.manager,
                 self.cfg.manager.gamma,
             );
             t2 = PhaseTimes::lap(&mut self.times.loss, t2);
-            if figures.entries > 0.0 {
-                opt.backward_step(&loss, self.cfg.manager.grad_clip_norm);
+            if l.figures.entries > 0.0 {
+                opt.backward_step(&l.loss, self.cfg.manager.grad_clip_norm);
             }
             PhaseTimes::lap(&mut self.times.backward, t2);
-            manager_figures = figures;
-            ctl.manager_init = Some(next);
+            manager_figures = l.figures;
+            ctl.manager_init = Some(l.next_init);
             for q in &mut ctl.queues {
                 let last = q.decisions.pop();
                 q.decisions.clear();
