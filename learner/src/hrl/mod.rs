@@ -24,6 +24,7 @@
 
 pub mod a2c;
 pub mod config;
+mod controller;
 pub mod feudal;
 pub mod init;
 pub mod stats;
@@ -35,9 +36,8 @@ pub mod worker;
 use std::path::Path;
 
 use planner::{Route, WorldGraph};
-use serde::{Deserialize, Serialize};
 use shm_schemas::EnvMeta;
-use sim::{Layout, ReplayRng, RngState, Task, action};
+use sim::{Layout, ReplayRng, Task, action};
 use tch::{Device, Tensor, nn};
 
 use crate::a2c::input::{CellInput, GOAL_CHANNEL, GoalMarks, NO_GOAL, goal_planes, mask};
@@ -49,45 +49,15 @@ use crate::batch_env::{BatchEnvironment, ObsView};
 use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
 pub use config::{AgentConfig, AgentKind, Candidates, HandOver, WorkerTaskEnd, WorldGraphInputs};
-use feudal::{Decision, DecisionQueue, Manager, ManagerHead};
+use controller::Controller;
+pub use controller::SavedController;
+use feudal::{Decision, Manager, ManagerHead};
 use stats::{Decisions, StepCounts};
 pub use stats::{EpisodeTrace, EvalResult, IterationStats};
 use steering::{Leg, Steering};
 use traversal::{Execution, Progress, Traversal};
 use wide_narrow::{WideNarrowHead, Window};
 use worker::{EpisodeEnd, WorkerGoal};
-
-/// One environment's hierarchical state.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct EnvCtl {
-    need_decision: bool,
-    /// Reset the Manager's core before its next decision.
-    manager_reset: bool,
-    goal: WorkerGoal,
-    traversal: Option<Traversal>,
-}
-
-/// The per-batch state of an agent: core states, goals, traversals, the
-/// action RNG, and (training) the Manager's decision queues.
-#[derive(Debug)]
-struct Controller {
-    worker_state: LstmState,
-    manager_state: Option<LstmState>,
-    steer_state: Option<LstmState>,
-    envs: Vec<EnvCtl>,
-    queues: Vec<DecisionQueue>,
-    manager_init: Option<LstmState>,
-    rng: ReplayRng,
-}
-
-/// What of a [`Controller`] is not a tensor, as saved with a training
-/// checkpoint ([`HrlAgent::save_controller`]).
-#[derive(Debug, Serialize, Deserialize)]
-struct ControllerRecord {
-    envs: Vec<EnvCtl>,
-    queues: Vec<DecisionQueue>,
-    rng: RngState,
-}
 
 /// A stage 2 agent (module docs).
 pub struct HrlAgent {
@@ -373,25 +343,13 @@ impl HrlAgent {
     }
 
     fn controller(&self, n: usize, seed: u64) -> Controller {
-        let fresh = EnvCtl {
-            need_decision: true,
-            manager_reset: true,
-            goal: WorkerGoal::new(NO_GOAL, NO_GOAL, NO_GOAL),
-            traversal: None,
-        };
-        Controller {
-            worker_state: self.worker.zero_state(n as i64),
-            manager_state: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
-            steer_state: self.gcp.as_ref().map(|g| g.network().zero_state(n as i64)),
-            envs: vec![fresh; n],
-            queues: (0..n)
-                .map(|_| DecisionQueue {
-                    decisions: Vec::new(),
-                })
-                .collect(),
-            manager_init: self.manager.as_ref().map(|m| m.zero_state(n as i64)),
-            rng: ReplayRng::seed_from_u64(seed),
-        }
+        Controller::new(
+            n,
+            seed,
+            &self.worker,
+            self.manager.as_ref(),
+            self.gcp.as_ref(),
+        )
     }
 
     /// The training controller — core states, goals, traversals, the
@@ -399,33 +357,8 @@ impl HrlAgent {
     /// and a tensor file. Saved with a checkpoint beside the environments'
     /// states, it lets a run resume mid-episode exactly where it stopped,
     /// so that neither validation nor a crash perturbs training.
-    pub fn save_controller(&self) -> Result<(Vec<u8>, Vec<u8>), LearnerError> {
-        let c = &self.ctl;
-        let record = ControllerRecord {
-            envs: c.envs.clone(),
-            queues: c.queues.clone(),
-            rng: c.rng.state(),
-        };
-        let json = serde_json::to_vec(&record).map_err(|e| LearnerError::Checkpoint {
-            path: "controller".into(),
-            message: e.to_string(),
-        })?;
-        let mut named: Vec<(String, &Tensor)> = Vec::new();
-        for (name, s) in [
-            ("worker", Some(&c.worker_state)),
-            ("manager", c.manager_state.as_ref()),
-            ("steer", c.steer_state.as_ref()),
-            ("manager_init", c.manager_init.as_ref()),
-        ] {
-            if let Some(s) = s {
-                named.push((format!("{name}/h"), &s.h));
-                named.push((format!("{name}/c"), &s.c));
-            }
-        }
-        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), *t)).collect();
-        let mut tensors = Vec::new();
-        Tensor::save_multi_to_stream(&refs, &mut tensors)?;
-        Ok((json, tensors))
+    pub fn save_controller(&self) -> Result<SavedController, LearnerError> {
+        self.ctl.save()
     }
 
     /// Restores [`Self::save_controller`]'s record and tensors (of an agent
@@ -436,47 +369,7 @@ impl HrlAgent {
         tensors: &[u8],
         source: &Path,
     ) -> Result<(), LearnerError> {
-        let bad = |message: String| LearnerError::Checkpoint {
-            path: source.display().to_string(),
-            message,
-        };
-        let record: ControllerRecord =
-            serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
-        if record.envs.len() != self.cfg.envs || record.queues.len() != self.cfg.envs {
-            return Err(bad(format!(
-                "a controller of {} environments, the agent has {}",
-                record.envs.len(),
-                self.cfg.envs
-            )));
-        }
-        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(tensors))
-            .map_err(|e| bad(e.to_string()))?;
-        let state = |name: &str| -> Result<Option<LstmState>, LearnerError> {
-            let find = |k: String| loaded.iter().find(|(n, _)| *n == k).map(|(_, t)| t.copy());
-            match (find(format!("{name}/h")), find(format!("{name}/c"))) {
-                (Some(h), Some(c)) => Ok(Some(LstmState { h, c })),
-                (None, None) => Ok(None),
-                _ => Err(bad(format!("half a core state {name}"))),
-            }
-        };
-        let worker = state("worker")?.ok_or_else(|| bad("no Worker core state".into()))?;
-        let (manager, steer, manager_init) =
-            (state("manager")?, state("steer")?, state("manager_init")?);
-        if manager.is_some() != self.manager.is_some()
-            || worker.h.size() != self.ctl.worker_state.h.size()
-        {
-            return Err(bad("the controller is of another agent".into()));
-        }
-        self.ctl = Controller {
-            worker_state: worker,
-            manager_state: manager,
-            steer_state: steer.or_else(|| self.ctl.steer_state.take()),
-            envs: record.envs,
-            queues: record.queues,
-            manager_init,
-            rng: ReplayRng::from_state(record.rng),
-        };
-        Ok(())
+        self.ctl.restore(json, tensors, source, self.cfg.envs)
     }
 
     /// Starts training segment `segment`: every environment starts a new
@@ -541,7 +434,7 @@ impl HrlAgent {
     /// `g_n` on planes of their own (WN), `g_w` only until it is paid (the
     /// Worker is rewarded for it once per interval).
     fn goal_marks(&self, ctl: &Controller) -> Vec<u32> {
-        worker_goal_marks(self.cfg.kind, ctl.envs.iter().map(|e| &e.goal))
+        worker_goal_marks(self.cfg.kind, ctl.goals())
     }
 
     fn slots(&self) -> usize {
@@ -876,13 +769,11 @@ impl HrlAgent {
             }
             let horizon = self.horizon;
             let (goal_r, penalty) = (self.cfg.goal_reward, self.cfg.step_penalty);
-            let c = &mut ctl.envs[e];
             let mut interval_over = ended;
-            if let Some(q) = ctl.queues[e].decisions.last_mut()
-                && train
-            {
-                q.rewards.push(m.reward);
+            if train {
+                ctl.book_manager_reward(e, m.reward);
             }
+            let c = &mut ctl.envs[e];
             if traversing[e] {
                 stats.traversal_steps += 1;
                 dones[e] = true;
@@ -941,24 +832,14 @@ impl HrlAgent {
                 dones[e] = s.done;
                 weights[e] = 1.0;
             }
-            let c = &mut ctl.envs[e];
             if interval_over && legs[e] == Leg::Going {
                 legs[e] = Leg::Ended;
             }
             if interval_over {
                 stats.intervals += 1;
-                c.need_decision = true;
-                c.traversal = None;
                 dones[e] = true;
-                if ended {
-                    c.manager_reset = true;
-                }
-                if train && let Some(q) = ctl.queues[e].decisions.last_mut() {
-                    q.complete = true;
-                    q.episode_ended = ended;
-                    if end == EpisodeEnd::Truncated {
-                        cut_manager.push(e);
-                    }
+                if ctl.end_interval(e, ended, train) && end == EpisodeEnd::Truncated {
+                    cut_manager.push(e);
                 }
             }
         }
@@ -1072,13 +953,7 @@ impl HrlAgent {
                 q.decisions.extend(last);
             }
         }
-        ctl.worker_state = ctl.worker_state.detach();
-        if let Some(s) = ctl.manager_state.as_mut() {
-            *s = s.detach();
-        }
-        if let Some(s) = ctl.steer_state.as_mut() {
-            *s = s.detach();
-        }
+        ctl.detach();
         self.ctl = ctl;
         Ok(IterationStats {
             env_steps: counts.steps,
@@ -1305,9 +1180,9 @@ fn worker_goal_marks<'a>(kind: AgentKind, goals: impl Iterator<Item = &'a Worker
 /// traversal (`NO_GOAL` where none is steered), and whether its core state
 /// starts afresh (a new edge begins).
 fn steer_targets(ctl: &Controller) -> (Vec<u32>, Vec<bool>) {
-    ctl.envs
-        .iter()
-        .map(|c| match &c.traversal {
+    ctl.traversals()
+        .into_iter()
+        .map(|t| match t {
             Some(t) => (t.waypoint().unwrap_or(NO_GOAL), t.leg_starts()),
             None => (NO_GOAL, false),
         })
