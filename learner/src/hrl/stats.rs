@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::a2c::LossFigures;
+use crate::batch_env::ObsView;
 
 /// What one iteration measured.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
@@ -108,6 +109,110 @@ impl StepCounts {
         self.decisions += d.count;
         self.exit_goals += d.exit_goals;
         self.ball_goals += d.ball_goals;
+    }
+
+    /// Counts environment `e`'s step that produced `obs`; `ended`: the step
+    /// ended the episode.
+    pub(super) fn count_step(&mut self, obs: &ObsView<'_>, e: usize, ended: bool) {
+        if ended {
+            self.episodes += 1;
+            self.returns += f64::from(obs.meta[e].episode_return);
+            self.successes += usize::from(reached_exit(obs, e));
+        }
+        self.steps += 1;
+    }
+
+    /// The share of the steps taken by traversal.
+    pub(super) fn traversal_share(&self) -> f64 {
+        self.traversal_steps as f64 / self.steps.max(1) as f64
+    }
+
+    /// The figures of a training iteration of these counts and the
+    /// Worker's and the Manager's losses.
+    pub(super) fn iteration(&self, worker: LossFigures, manager: LossFigures) -> IterationStats {
+        IterationStats {
+            env_steps: self.steps,
+            episodes: self.episodes,
+            mean_return: if self.episodes > 0 {
+                self.returns / self.episodes as f64
+            } else {
+                0.0
+            },
+            worker,
+            manager,
+            intervals: self.intervals,
+            goals_reached: if self.intervals > 0 {
+                self.reached as f64 / self.intervals as f64
+            } else {
+                0.0
+            },
+            traversal_share: self.traversal_share(),
+            exit_share: self.successes as f64 / self.episodes.max(1) as f64,
+            decisions: self.decisions,
+            exit_goal_share: self.exit_goals as f64 / self.decisions.max(1) as f64,
+            ball_goal_share: self.ball_goals as f64 / self.decisions.max(1) as f64,
+        }
+    }
+}
+
+/// Whether environment `e`'s episode ended, with the step that produced
+/// `obs`, by the agent stepping onto the exit (its success; judged on the
+/// final state, since the observation is the next episode's start).
+pub(super) fn reached_exit(obs: &ObsView<'_>, e: usize) -> bool {
+    let m = &obs.meta[e];
+    m.terminated()
+        && obs
+            .final_cells
+            .get(e * obs.width * obs.height + obs.end_cell(e) as usize)
+            .is_some_and(|&c| c == sim::Object::Exit as u8)
+}
+
+/// The evaluation episode being traced: environment `env`'s, `step` steps
+/// in.
+#[derive(Debug)]
+pub(super) struct Tracing<'a> {
+    /// The traced environment.
+    pub(super) env: usize,
+    /// Steps taken so far.
+    pub(super) step: u32,
+    /// The trace.
+    pub(super) trace: &'a mut EpisodeTrace,
+}
+
+impl Tracing<'_> {
+    /// Records the Manager's decision `(g_w, g_n)` in environment `e`.
+    pub(super) fn decision(&mut self, e: usize, wide: u32, narrow: u32) {
+        if e == self.env {
+            self.trace.goals.push((self.step, wide, narrow));
+        }
+    }
+
+    /// Records environment `e`'s step that produced `obs` and led the agent
+    /// to `cell` (`traversed`: by traversal; `ended`: the step ended the
+    /// episode, whose final grid the step record holds).
+    pub(super) fn step(
+        &mut self,
+        obs: &ObsView<'_>,
+        e: usize,
+        cell: u32,
+        traversed: bool,
+        ended: bool,
+    ) {
+        if e != self.env {
+            return;
+        }
+        let t = &mut *self.trace;
+        t.cells.push(cell);
+        t.traversed.push(traversed);
+        self.step += 1;
+        if ended {
+            let cpe = obs.width * obs.height;
+            t.end_cells = obs
+                .final_cells
+                .get(e * cpe..(e + 1) * cpe)
+                .map(<[u8]>::to_vec)
+                .unwrap_or_default();
+        }
     }
 }
 
