@@ -61,7 +61,7 @@ pub enum HandOver {
 }
 
 /// Settings of a stage 2 agent. Sizes default to `π_g`'s (the paper
-/// "inherit[s] most hyperparameters from the training of `π_g`"; the
+/// "inherit\[s\] most hyperparameters from the training of `π_g`"; the
 /// Manager and the Worker "share similar model architecture").
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

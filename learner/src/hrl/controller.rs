@@ -85,7 +85,7 @@ struct ControllerRecord {
 }
 
 /// A training controller as a checkpoint saves it
-/// ([`HrlAgent::save_controller`](super::HrlAgent::save_controller)).
+/// (`HrlAgent::save_controller`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SavedController {
     /// Goals, traversals, the Manager's decision queues and the action

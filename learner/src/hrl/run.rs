@@ -4,15 +4,17 @@
 //!
 //! A batch step ([`HrlAgent::step_batch`]):
 //!
-//! 1. the Manager decides for every environment whose interval ended
-//!    (sections 4.1–4.2; [`ManagerSide::decide`](super::manager::ManagerSide::decide));
+//! 1. the Manager decides for every environment that needs a goal — its
+//!    episode started or its interval ended (sections 4.1–4.2;
+//!    `ManagerSide::decide`);
 //! 2. an environment whose agent stands on a pivotal state with a route to
 //!    its wide goal hands over to a world graph traversal (section 4.3);
 //! 3. the Worker (the baseline) samples every environment's action, and a
 //!    traversal under way overrides it with its own;
 //! 4. the environments step;
 //! 5. each step is booked: the task's reward for the Manager's interval,
-//!    the Worker's reward from its goals ([`super::worker`]) or the
+//!    the Worker's reward from its goals ([`super::worker`]; a Worker that
+//!    now stands where a traversal can start hands over to it) or the
 //!    traversal's progress ([`traversal::book_step`]), and where the
 //!    interval ends, a decision is due at the next step.
 //!

@@ -1,8 +1,9 @@
 //! What running a stage 2 agent reports: a training iteration's figures
 //! ([`IterationStats`]), an evaluation's scores ([`EvalResult`]) and one
 //! evaluation episode for the picture of the paper's Figure 1
-//! ([`EpisodeTrace`]); and the counts a batch step adds to
-//! ([`StepCounts`], [`Decisions`]).
+//! ([`EpisodeTrace`]); and, inside the agent, the counts a batch step adds
+//! to (`StepCounts`, `Decisions`) and the trace of the episode under way
+//! (`Tracing`).
 
 use serde::{Deserialize, Serialize};
 

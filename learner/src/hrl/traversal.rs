@@ -20,8 +20,8 @@
 //! rewards for the Manager. A replayed action whose outcome differs from the
 //! recorded one (a world that changed under the route) ends the traversal.
 //!
-//! [`Traverser`] runs the traversals of a batch: it starts them
-//! ([`Traverser::try_start`]), chooses their actions — replayed, or
+//! Inside the agent, `Traverser` runs the traversals of a batch: it starts
+//! them (`Traverser::try_start`), chooses their actions — replayed, or
 //! steered by `π_g` and recorded for its fine-tuning ([`super::steering`])
 //! — and books their steps ([`book_step`]).
 

@@ -22,9 +22,9 @@
 //!
 //! The Worker sees its goals as marks on goal planes of its input
 //! ([`goal_marks`]): the subgoal (FN), or `g_w` and `g_n` on planes of
-//! their own (WN). [`WorkerSide`] owns its network, var store, optimiser
-//! and training rollout; the A2C baseline (section 4.1) is the same side
-//! without goal planes.
+//! their own (WN). Inside the agent, `WorkerSide` owns its network, var
+//! store, optimiser and training rollout; the A2C baseline (section 4.1) is
+//! the same side without goal planes.
 
 use tch::nn;
 
