@@ -98,8 +98,8 @@ impl HrlAgent {
                 self.traverser.try_start(&c.goal, &mut c.traversal, obs, e);
             }
         }
-        let goals = self.worker.goal_marks(ctl.goals());
-        let out = self.worker.act(obs, &goals, &ctl.worker_state, train);
+        let marks = self.worker.goal_marks(ctl.goals());
+        let out = self.worker.act(obs, &marks, &ctl.worker_state, train);
         let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
         let mut actions = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
         let traversals: Vec<Option<&Traversal>> =
@@ -216,11 +216,11 @@ impl HrlAgent {
             // Truncation is not termination (Gymnasium's final_obs): the
             // cut steps' targets go on from their final states' values.
             if !book.cut_worker.is_empty() {
-                let goals = self.worker.goal_marks(ctl.goals());
+                let marks = self.worker.goal_marks(ctl.goals());
                 self.worker.bootstrap_truncated(
                     &mut book.rewards,
                     &obs,
-                    &goals,
+                    &marks,
                     &acted.state,
                     &book.cut_worker,
                     self.cfg.worker.gamma,
@@ -293,8 +293,8 @@ impl HrlAgent {
             if let Some(m) = &self.manager {
                 counts.add(m.decide(&mut ctl, &obs, true, None));
             }
-            let goals = self.worker.goal_marks(ctl.goals());
-            self.worker.bootstrap(&obs, &goals, &ctl.worker_state);
+            let marks = self.worker.goal_marks(ctl.goals());
+            self.worker.bootstrap(&obs, &marks, &ctl.worker_state);
             self.traverser
                 .fine_tune(&obs, &ctl.traversals(), ctl.steer_state.as_ref());
         }
