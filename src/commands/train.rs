@@ -707,9 +707,9 @@ fn save_state(
     let [weights, record, tensors, envs] = checkpoint_files(state.segments_done);
     write_atomic(&ckpt.join(weights), &agent.to_bytes()?)?;
     if let Some(snapshot) = env.and_then(|e| e.snapshot()) {
-        let (json, t) = agent.save_controller()?;
-        write_atomic(&ckpt.join(record), &json)?;
-        write_atomic(&ckpt.join(tensors), &t)?;
+        let saved = agent.save_controller()?;
+        write_atomic(&ckpt.join(record), &saved.record)?;
+        write_atomic(&ckpt.join(tensors), &saved.tensors)?;
         write_atomic(&ckpt.join(envs), &serde_json::to_vec(&snapshot)?)?;
     }
     if let Some(b) = best {

@@ -239,6 +239,29 @@ impl GoalMap {
     }
 }
 
+/// One acting step of the [`Manager`] ([`Manager::act`]).
+#[derive(Debug)]
+pub struct ManagerStep {
+    /// The core state after the step.
+    pub state: LstmState,
+    /// `V(s)` of each observation.
+    pub values: Vec<f32>,
+    /// The core outputs `h_t` (`[S, hidden]`) the goal head reads.
+    pub h: Tensor,
+}
+
+/// The Manager's A2C loss over its decision queues ([`Manager::loss`]).
+#[derive(Debug)]
+pub struct ManagerLoss {
+    /// The loss to back-propagate.
+    pub loss: Tensor,
+    /// Its figures.
+    pub figures: LossFigures,
+    /// Each environment's core state before its interval under way: the
+    /// `init` of the next update.
+    pub next_init: LstmState,
+}
+
 /// The Manager: a trunk without goal channel, a value head, a goal head
 /// and, optionally, a [`GoalMap`].
 #[derive(Debug)]
@@ -322,14 +345,17 @@ impl Manager {
     }
 
     /// One acting step (no gradient) on `input` (`S` observations) from
-    /// `state` (`[S, hidden]`): the next state, the values and the core
-    /// outputs.
-    pub fn act(&self, input: &CellInput, state: &LstmState) -> (LstmState, Vec<f32>, Tensor) {
+    /// `state` (`[S, hidden]`).
+    pub fn act(&self, input: &CellInput, state: &LstmState) -> ManagerStep {
         tch::no_grad(|| {
             let next = self.trunk.step(&self.trunk.features(input), state);
             let v = self.value.forward(&next.h).squeeze_dim(-1);
             let h = next.h.shallow_clone();
-            (next, floats(&v), h)
+            ManagerStep {
+                state: next,
+                values: floats(&v),
+                h,
+            }
         })
     }
 
@@ -342,7 +368,7 @@ impl Manager {
             input.push_final_env(obs, e, None);
         }
         let idx = Tensor::from_slice(&envs.iter().map(|&e| e as i64).collect::<Vec<_>>());
-        self.act(&input, &state.select(&idx)).1
+        self.act(&input, &state.select(&idx)).values
     }
 
     /// FN: the subgoal distribution of core outputs `h`, plus the goal
@@ -365,16 +391,14 @@ impl Manager {
 
     /// The A2C loss of the trainable decisions of `queues` (every complete
     /// one; the interval under way only bootstraps), unrolling the core over
-    /// each environment's decisions from `init`. Returns the loss, its
-    /// figures, and each environment's core state before its interval
-    /// under way (the next `init`).
+    /// each environment's decisions from `init`.
     pub fn loss(
         &self,
         queues: &[DecisionQueue],
         init: &LstmState,
         cfg: &A2cConfig,
         gamma: f64,
-    ) -> (Tensor, LossFigures, LstmState) {
+    ) -> ManagerLoss {
         let b = queues.len();
         let k_max = queues
             .iter()
@@ -493,7 +517,11 @@ impl Manager {
             h: Tensor::stack(&next_h, 0),
             c: Tensor::stack(&next_c, 0),
         };
-        (loss, figures, next)
+        ManagerLoss {
+            loss,
+            figures,
+            next_init: next,
+        }
     }
 }
 
