@@ -1075,6 +1075,16 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                     },
                     exit_goal_share: s.exit_goal_share,
                     ball_goal_share: s.ball_goal_share,
+                    key_share: if s.episodes > 0 {
+                        s.key_share
+                    } else {
+                        f64::NAN
+                    },
+                    door_share: if s.episodes > 0 {
+                        s.door_share
+                    } else {
+                        f64::NAN
+                    },
                 })?;
             }
             bar.inc(1);

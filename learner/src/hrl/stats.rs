@@ -37,6 +37,11 @@ pub struct IterationStats {
     pub exit_goal_share: f64,
     /// Share of those whose narrow goal `g_n` held a ball when named.
     pub ball_goal_share: f64,
+    /// Share of the episodes that ended carrying the key (Door-Key).
+    pub key_share: f64,
+    /// Share of the episodes whose final grid has an open door (Door-Key:
+    /// the agent opened the locked one).
+    pub door_share: f64,
 }
 
 /// The result of an evaluation: one episode per environment.
@@ -90,6 +95,10 @@ pub(super) struct StepCounts {
     pub(super) returns: f64,
     /// Those that ended on the exit.
     pub(super) successes: usize,
+    /// Those that ended carrying the key.
+    pub(super) with_key: usize,
+    /// Those whose final grid has an open door.
+    pub(super) door_open: usize,
     /// Manager intervals that ended.
     pub(super) intervals: usize,
     /// Intervals in which `g_n` was reached.
@@ -119,6 +128,13 @@ impl StepCounts {
             self.episodes += 1;
             self.returns += f64::from(obs.meta[e].episode_return);
             self.successes += usize::from(reached_exit(obs, e));
+            self.with_key += usize::from(obs.meta[e].end_carrying == sim::Object::Key as u8);
+            let cells = obs.width * obs.height;
+            self.door_open += usize::from(
+                obs.final_cells
+                    .get(e * cells..(e + 1) * cells)
+                    .is_some_and(|g| g.contains(&(sim::Object::DoorOpen as u8))),
+            );
         }
         self.steps += 1;
     }
@@ -152,6 +168,8 @@ impl StepCounts {
             decisions: self.decisions,
             exit_goal_share: self.exit_goals as f64 / self.decisions.max(1) as f64,
             ball_goal_share: self.ball_goals as f64 / self.decisions.max(1) as f64,
+            key_share: self.with_key as f64 / self.episodes.max(1) as f64,
+            door_share: self.door_open as f64 / self.episodes.max(1) as f64,
         }
     }
 }
@@ -227,4 +245,38 @@ pub(super) struct Decisions {
     pub(super) exit_goals: usize,
     /// Decisions whose narrow goal `g_n` holds a ball.
     pub(super) ball_goals: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::batch_env::{BatchEnvironment, InProcess};
+    use sim::{EnvConfig, Layout, Task, action};
+
+    /// Door-Key's figures come from the final state of an episode: an
+    /// episode cut by the step limit after the agent picked up the key and
+    /// opened the door counts in both; one that did neither in none.
+    #[test]
+    fn an_episode_that_took_the_key_and_opened_the_door_counts_in_both_shares() {
+        let layout = Layout::parse("door", "######\n#>KD.#\n#...E#\n######").expect("layout");
+        let cfg = EnvConfig {
+            task: Task::DoorKey,
+            max_steps: 3,
+            ..EnvConfig::for_task(Task::DoorKey, &layout)
+        };
+        let mut env = InProcess::new(layout, cfg, 2, 0, 1).expect("env");
+        let mut counts = StepCounts::default();
+        // Environment 0 picks up the key, steps onto its cell, opens the
+        // door; environment 1 turns on the spot.
+        for a in [action::PICKUP, action::FORWARD, action::TOGGLE] {
+            env.step(&[a, action::LEFT]).expect("step");
+            let obs = env.observe();
+            for e in 0..2 {
+                counts.count_step(&obs, e, obs.meta[e].done());
+            }
+        }
+        let s = counts.iteration(LossFigures::default(), LossFigures::default());
+        assert_eq!(s.episodes, 2, "the step limit ends both episodes");
+        assert_eq!((s.key_share, s.door_share), (0.5, 0.5));
+    }
 }
