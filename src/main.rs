@@ -21,6 +21,7 @@ mod pipeline;
 mod progress;
 mod results;
 mod roles;
+mod shutdown;
 mod stats;
 mod update_log;
 mod world;

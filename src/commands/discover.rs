@@ -13,11 +13,11 @@ use serde::Serialize;
 use sim::render::{Canvas, Rgb, draw_grid, object_color};
 use sim::{Layout, Maze, Object, Task};
 
-use super::run::teardown;
 use crate::chart::{
     LegendEntry, LineChart, Mark, Series, XScale, blended, captioned, object_entries,
 };
 use crate::pipeline::{Pipeline, Role, world_words};
+use crate::shutdown::teardown;
 use crate::world::WorldArgs;
 
 /// `discover` options.

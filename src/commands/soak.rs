@@ -30,13 +30,14 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use super::run::{RunCmdArgs, stop_flag, teardown};
+use super::run::RunCmdArgs;
 use super::soak_training::{KillCost, TrainingReport};
 use crate::pipeline::Role;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;
 use crate::roles::{OnPeerDeath, RunArgs};
+use crate::shutdown::{stop_flag, teardown};
 use crate::world::WorldArgs;
 
 /// Growth of a process's resident set above which the soak fails (KiB).
