@@ -758,7 +758,7 @@ pub const RANDOM_GRAPHS: usize = 5;
 /// Random pairs of cells routed per graph.
 pub const ROUTE_PAIRS: usize = 500;
 
-/// `V_p` against `V_rand` on the maze's structure (paper section 5,
+/// `V_p` against `V_rand` on the maze's structure (section 5,
 /// "Benefit of Learned Pivotal States").
 struct StructureReport {
     passages: usize,

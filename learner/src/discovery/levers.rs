@@ -38,11 +38,12 @@ impl DiscoveryConfig {
 /// a shortest route through the transitions the agent has observed, ties
 /// broken at random ([`crate::experience`]). They stand for what a trained
 /// `π_g` does (section 3.2), whose trajectories the latent model learns
-/// from (section 3.1): on this machine's budget `π_g` reaches goals within
-/// one room only, while a trajectory whose legs cross rooms is what the
-/// doorways explain. The chains join the walks and `π_g`'s episodes as a
-/// third source of the training buffer, and `batch_share` of every latent
-/// batch is drawn from them.
+/// from (section 3.1): at this implementation's budget `π_g` reaches
+/// goals within a room only (`docs/implementation_details.md`, "Where
+/// stage 1 departs from the paper"), while a trajectory whose legs cross
+/// rooms is what the doorways explain. The chains join the walks and
+/// `π_g`'s episodes as a third source of the training buffer, and
+/// `batch_share` of every latent batch is drawn from them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GoalChains {
