@@ -33,11 +33,12 @@
 //! - `walks.rs`: step 1's random walks and path replays;
 //! - `buffer.rs`: the latent model's training buffer (held-out share,
 //!   newest kept, batches mixed over the sources);
-//! - `levers.rs`: the optional research levers, settings that are not the
-//!   paper's ([`GoalChains`], [`GoalCurriculum`],
+//! - `levers.rs`: what the optional research levers do, the settings that
+//!   are not the paper's ([`GoalChains`], [`GoalCurriculum`],
 //!   [`DiscoveryConfig::loop_erase_goal_trajectories`],
-//!   [`DiscoveryConfig::shortest_known_paths`]) and what they do;
-//! - `config.rs`: [`DiscoveryConfig`] and its validation;
+//!   [`DiscoveryConfig::shortest_known_paths`]);
+//! - `config.rs`: every setting ([`DiscoveryConfig`], the levers' among
+//!   them) and its validation;
 //! - `checkpointing.rs`: save and resume (the checkpoint directory's
 //!   `latent.ot`, `gcp.ot` and `state.json`);
 //! - `config_diff.rs`: [`config_difference`], the field a resumed run's
@@ -59,9 +60,8 @@ use sim::{Layout, action};
 
 use self::buffer::{EVAL_PER_SOURCE, hold_out, mixed_batch, mixed_eval, push_newest};
 use self::checkpointing::State;
-pub use self::config::DiscoveryConfig;
+pub use self::config::{DiscoveryConfig, GoalChains, GoalCurriculum};
 pub use self::config_diff::config_difference;
-pub use self::levers::{GoalChains, GoalCurriculum};
 pub use self::walks::pose_of;
 use crate::batch_env::BatchEnvironment;
 use crate::edge_refinement::{RefinementStats, refine_with_gcp};
@@ -201,6 +201,7 @@ impl Discovery {
         // 1. Trajectories: random walks, then π_g rollouts, each one A2C
         // update of π_g (4.) with the curiosity of the latent model as the
         // previous round left it.
+        self.shorten_known_paths(env); // a lever (levers.rs)
         let (walks, mut env_steps) = self.collect_walks(env, &mut rng)?;
         let mut gcp_stats: Vec<GcpStats> = Vec::new();
         for _ in 0..cfg.gcp_iters_per_round {

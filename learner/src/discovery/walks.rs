@@ -122,11 +122,6 @@ impl Discovery {
                 actions: Vec::new(),
             })
             .collect();
-        if cfg.shortest_known_paths {
-            // Every environment was just reset: the agent is at the start.
-            let start = pose_of(&env.observe().meta[0], width);
-            self.shorten_paths(start);
-        }
         let mut out = Vec::new();
         let mut actions = vec![0u8; n];
         let steps = cfg.walk_steps_per_round as u64;

@@ -362,8 +362,9 @@ impl GoalBook {
                 let mut done = std::mem::replace(&mut self.episodes[i], next);
                 if self.record && !chained {
                     if !success && !self.record_missed_legs {
-                        // A lever (levers.rs): the missed leg goes.
-                        done.drop_missed_leg();
+                        // Up to the last goal reached: the missed leg goes.
+                        done.trajectory.actions.truncate(done.reached);
+                        done.trajectory.states.truncate(done.reached + 1);
                     }
                     if !done.trajectory.actions.is_empty() {
                         self.finished.push(done.trajectory);

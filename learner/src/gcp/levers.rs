@@ -1,13 +1,13 @@
-//! The settings of `π_g` that are not the paper's, and their code:
-//!
-//! - the goal distance of a curriculum
-//!   ([`GoalConditionedPolicy::set_goal_distance`], driven by the discovery
-//!   loop's [`crate::discovery::GoalCurriculum`]);
-//! - recording a chain of goal episodes only up to its last reached goal
-//!   ([`super::GcpConfig::record_missed_legs`] off; on by default).
+//! The lever of `π_g` that is not the paper's: the distance of its
+//! training goals ([`GoalConditionedPolicy::set_goal_distance`]), which
+//! the discovery loop's goal curriculum moves round by round
+//! (`discovery::GoalCurriculum`). The paper draws goals at "the end points
+//! of random walks with reasonable length" (section 3.2) and leaves the
+//! length open. The other setting that departs from the paper,
+//! [`super::GcpConfig::record_missed_legs`], is a flag of the goal
+//! episodes (`goals.rs`).
 
 use super::GoalConditionedPolicy;
-use super::goals::GoalEpisode;
 
 impl GoalConditionedPolicy {
     /// Training goals from now on lie 1 to `moves` moves away by path
@@ -25,14 +25,5 @@ impl GoalConditionedPolicy {
     /// ([`Self::set_goal_distance`]; `goal_walk_len` until it is called).
     pub fn goal_distance(&self) -> usize {
         self.book.walk_len
-    }
-}
-
-impl GoalEpisode {
-    /// Cuts the recorded trajectory back to the last goal it reached: the
-    /// missed leg goes ([`super::GcpConfig::record_missed_legs`] off).
-    pub(super) fn drop_missed_leg(&mut self) {
-        self.trajectory.actions.truncate(self.reached);
-        self.trajectory.states.truncate(self.reached + 1);
     }
 }

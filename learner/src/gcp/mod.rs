@@ -39,8 +39,8 @@
 //!   evaluation;
 //! - `goals.rs`: goal sampling ([`GoalSampler`]) and the goal episodes of
 //!   a batch (their rewards, ends and recorded trajectories);
-//! - `levers.rs`: the settings that are not the paper's and their code
-//!   (the goal distance of a curriculum, recording missed legs);
+//! - `levers.rs`: the distance of the training goals, which the
+//!   discovery loop's goal curriculum (not the paper's) moves;
 //! - `config.rs`: [`GcpConfig`] and its validation;
 //! - `checkpointing.rs`: the weights, saved and loaded.
 
