@@ -270,7 +270,11 @@ mod tests {
             env_steps: update * 1920,
             wall_seconds: update as f64 * 0.25,
             episodes: (update % 3) as usize,
-            episodic_return: if update % 3 == 0 { f64::NAN } else { 0.5 },
+            episodic_return: if update.is_multiple_of(3) {
+                f64::NAN
+            } else {
+                0.5
+            },
             policy_loss: -0.01,
             value_loss: 0.04,
             entropy: 1.05,

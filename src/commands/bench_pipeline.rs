@@ -36,11 +36,12 @@ use serde::Serialize;
 use shm_schemas::EnvMeta;
 use sim::{BatchEnv, StepOut};
 
-use super::run::{RunCmdArgs, teardown};
+use super::run::RunCmdArgs;
 use crate::latency::Latencies;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{OnPeerDeath, RunArgs};
+use crate::shutdown::teardown;
 use crate::world::WorldArgs;
 
 /// `bench pipeline` options.

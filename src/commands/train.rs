@@ -1134,7 +1134,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     drop(env);
     if let Some((mut p, run_name)) = pipeline {
         p.stop_all(std::time::Duration::from_secs(3));
-        super::run::teardown(&run_name)?;
+        crate::shutdown::teardown(&run_name)?;
     }
     bar.finish_and_clear();
     let _ = started;

@@ -22,6 +22,7 @@
 //!   `worldgraph bench learner`;
 //! - [`a2c_loss`]: `L = L_π + c_V · L_V − c_H · H` over weighted entries.
 
+mod grad_path;
 pub mod input;
 pub mod net;
 pub mod optim;

@@ -25,23 +25,11 @@
 
 use tch::{Kind, Tensor, nn};
 
+pub use super::grad_path::GradPath;
 use super::input::{CellInput, GoalMarks, encode_obs, goal_planes};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
 use super::{A2cConfig, Categorical, LossFigures, PhaseTimes, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
-
-/// How the update gets its gradients (module docs).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum GradPath {
-    /// Act without gradient, recompute the rollout in one batch.
-    Recompute,
-    /// Keep the autograd graph of every step; gather-and-sum first layer.
-    #[default]
-    PerStep,
-    /// The plain implementation: the autograd graph of every step, the
-    /// dense first convolution over one-hot planes.
-    Plain,
-}
 
 /// One rollout of an every-step agent.
 #[derive(Debug)]
