@@ -555,6 +555,29 @@ mod tests {
         planes
     }
 
+    /// A goal map (seeded by `seed`) trained for `iters` Adam steps to name
+    /// the cell of a ball at `(x, y)` of a `w × h` grid of floor.
+    fn map_trained_on_a_ball(
+        seed: u64,
+        w: i64,
+        h: i64,
+        (x, y): (i64, i64),
+        iters: usize,
+    ) -> GoalMap {
+        let vs = nn::VarStore::new(Device::Cpu);
+        let map = crate::seeding::init_seeded(seed, || {
+            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
+        });
+        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        for _ in 0..iters {
+            let logp = map
+                .logits_dense(&ball_at(w, h, x, y))
+                .log_softmax(-1, Kind::Float);
+            opt.backward_step(&(-logp.get(0).get(y * w + x)));
+        }
+        map
+    }
+
     #[test]
     fn an_untrained_goal_map_leaves_the_goal_head_as_it_is() {
         let vs = nn::VarStore::new(Device::Cpu);
@@ -572,17 +595,7 @@ mod tests {
     #[test]
     fn the_candidates_read_the_map_at_their_own_cells() {
         let (w, h) = (7, 6);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let mut map = crate::seeding::init_seeded(4, || {
-            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
-        });
-        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
-        for _ in 0..40 {
-            let logp = map
-                .logits_dense(&ball_at(w, h, 5, 2))
-                .log_softmax(-1, Kind::Float);
-            opt.backward_step(&(-logp.get(0).get(2 * w + 5)));
-        }
+        let mut map = map_trained_on_a_ball(4, w, h, (5, 2), 40);
         let cells = [3u32, 19, 30, 40];
         let planes = ball_at(w, h, 5, 2);
         let all = map.logits_dense(&planes);
@@ -604,18 +617,8 @@ mod tests {
     #[test]
     fn naming_a_ball_learnt_in_one_place_transfers_to_another() {
         let (w, h) = (9, 9);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let map = crate::seeding::init_seeded(3, || {
-            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
-        });
-        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        let map = map_trained_on_a_ball(3, w, h, (2, 2), 60);
         let cell = |x: i64, y: i64| y * w + x;
-        for _ in 0..60 {
-            let logp = map
-                .logits_dense(&ball_at(w, h, 2, 2))
-                .log_softmax(-1, Kind::Float);
-            opt.backward_step(&(-logp.get(0).get(cell(2, 2))));
-        }
         let p = map
             .logits_dense(&ball_at(w, h, 6, 5))
             .softmax(-1, Kind::Float)
@@ -657,18 +660,7 @@ mod tests {
         let window = Window::new(5, &layout);
         let cell = |x: i64, y: i64| (y * w + x) as u32;
         let candidates = [cell(3, 3), cell(9, 8), cell(3, 9)];
-        let vs = nn::VarStore::new(Device::Cpu);
-        let map = crate::seeding::init_seeded(3, || {
-            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
-        });
-        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
-        for _ in 0..60 {
-            let logp = map
-                .logits_dense(&ball_at(w, h, 2, 2))
-                .log_softmax(-1, Kind::Float);
-            opt.backward_step(&(-logp.get(0).get(i64::from(cell(2, 2)))));
-        }
-        let map = map.with_windows(&window, &candidates);
+        let map = map_trained_on_a_ball(3, w, h, (2, 2), 60).with_windows(&window, &candidates);
         // The ball two cells right and one down of the second candidate.
         let bias = map.bias_dense(&ball_at(w, h, 11, 9));
         assert_eq!(bias.wide.size(), [1, 3]);
