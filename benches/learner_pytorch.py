@@ -2,7 +2,7 @@
 """The PyTorch reference of ``worldgraph bench learner`` (issue 26).
 
 An independent PyTorch-Python implementation of the networks and the A2C
-update of worldgraph's Rust learners (``learner/src/a2c``, ``gcp.rs``,
+update of worldgraph's Rust learners (``learner/src/a2c``, ``gcp/``,
 ``hrl/``), trained on the project's own simulator through its Python
 package (``worldgraph/MultiGoal-{Small,Medium,Large}-v0``, the same Rust
 environments the Rust bench steps), so that ``bench learner`` can state its
@@ -432,7 +432,7 @@ class A2cDriver:
 
 
 class GcpDriver:
-    """``π_g``'s training (``gcp.rs``): goal episodes of random free cells."""
+    """``π_g``'s training (``gcp/``): goal episodes of random free cells."""
 
     def __init__(self, env, args, path, rng, channels_last):
         self.env, self.rng = env, rng

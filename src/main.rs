@@ -7,7 +7,7 @@
 //! layer around them: the paper's training protocol and run directories
 //! (`commands/train.rs`, `commands/discover.rs`), the experiment grid and
 //! its results (`commands/experiment.rs`, `results.rs`), the pipeline's
-//! process roles (`roles/`) and the charts (`chart.rs`).
+//! process roles (`roles/`) and the charts (`chart/`).
 
 use std::process::ExitCode;
 
@@ -21,6 +21,7 @@ mod pipeline;
 mod progress;
 mod results;
 mod roles;
+mod shutdown;
 mod stats;
 mod update_log;
 mod world;

@@ -138,10 +138,10 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut v: serde_json::Value = serde_json::from_slice(&bytes)
         .with_context(|| format!("{} is not a run summary", path.display()))?;
-    // A summary written before the Manager's goal map or the Worker's
-    // booking of the task's end existed ran without the one and with the
-    // terminal booking: its recorded agent settings say so, not today's
-    // defaults.
+    // A summary written before the Manager's goal map, its windows or the
+    // Worker's booking of the task's end existed ran without the first two
+    // and with the terminal booking: its recorded agent settings say so,
+    // not today's defaults.
     if let Some(agent) = v
         .get_mut("train_config")
         .and_then(|t| t.get_mut("agent"))
@@ -149,6 +149,9 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
     {
         agent
             .entry("goal_map")
+            .or_insert(serde_json::Value::Bool(false));
+        agent
+            .entry("goal_map_windows")
             .or_insert(serde_json::Value::Bool(false));
         agent
             .entry("worker_task_end")
@@ -166,13 +169,19 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
 }
 
 /// Every run summary under `root` (discovery summaries are skipped),
-/// sorted by path. Two summaries of the same run (configuration, maze, task
-/// and seed), such as a copy under another name or folder, are refused
-/// naming both files: each would count as a seed of its cell.
-pub fn read_all_runs(root: &Path) -> anyhow::Result<Vec<RunResult>> {
+/// sorted by path, and the other result sets nested under it, which are not
+/// read: a folder below `root` with a maze's folder of its own
+/// (`results/goal-map/small/...` under `results/`) is a grid's results at
+/// its own budget, and a table never mixes budgets. Two summaries of the
+/// same run (configuration, maze, task and seed), such as a copy under
+/// another name or folder, are refused naming both files: each would count
+/// as a seed of its cell.
+pub fn read_all_runs(root: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf>)> {
     let mut files = Vec::new();
-    collect(root, &mut files)?;
+    let mut nested = Vec::new();
+    collect(root, true, &mut files, &mut nested)?;
     files.sort();
+    nested.sort();
     let mut seen: std::collections::BTreeMap<(String, String, String, u64), &Path> =
         std::collections::BTreeMap::new();
     let mut runs = Vec::new();
@@ -196,16 +205,25 @@ pub fn read_all_runs(root: &Path) -> anyhow::Result<Vec<RunResult>> {
         }
         runs.push(r);
     }
-    Ok(runs)
+    Ok((runs, nested))
 }
 
-fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+fn collect(
+    dir: &Path,
+    root: bool,
+    out: &mut Vec<PathBuf>,
+    nested: &mut Vec<PathBuf>,
+) -> anyhow::Result<()> {
+    if !root && is_result_set(dir) {
+        nested.push(dir.to_path_buf());
+        return Ok(());
+    }
     let entries =
         std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
     for e in entries {
         let p = e?.path();
         if p.is_dir() {
-            collect(&p, out)?;
+            collect(&p, false, out, nested)?;
         } else if p
             .file_name()
             .and_then(|n| n.to_str())
@@ -215,6 +233,12 @@ fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Whether `dir` holds a result set of its own: a folder named after a
+/// maze (`<dir>/small/`, ...).
+fn is_result_set(dir: &Path) -> bool {
+    sim::Maze::ALL.iter().any(|m| dir.join(m.name()).is_dir())
 }
 
 /// The commit the binary was built from (`+dirty` when tracked files had

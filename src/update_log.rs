@@ -67,21 +67,31 @@ pub struct UpdateRow {
     /// `g_n` holds a ball when it is named (0 for A2C): how often the
     /// Manager points the Worker at the task's rewards.
     pub ball_goal_share: f64,
+    /// Share of the training episodes that ended during the update carrying
+    /// the key (Door-Key; `NaN` when none ended).
+    pub key_share: f64,
+    /// Share of the training episodes that ended during the update with an
+    /// open door in their final grid (Door-Key: the locked door was opened;
+    /// `NaN` when none ended).
+    pub door_share: f64,
 }
 
 /// The CSV header, the fields of [`UpdateRow`] in order.
-pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share,ball_goal_share";
+pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share,ball_goal_share,key_share,door_share";
 /// Fields of a row written before the exit columns (read on resume).
 const OLD_FIELDS: usize = 15;
 /// Fields of a row written before the ball column (read on resume).
 const EXIT_FIELDS: usize = 17;
+/// Fields of a row written before the key and door columns (read on
+/// resume).
+const BALL_FIELDS: usize = 18;
 
 impl UpdateRow {
     fn csv_line(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6},{:.6}",
+            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6}",
             self.update,
             self.env_steps,
             self.wall_seconds,
@@ -99,7 +109,9 @@ impl UpdateRow {
             self.sps,
             self.exit_share,
             self.exit_goal_share,
-            self.ball_goal_share
+            self.ball_goal_share,
+            self.key_share,
+            self.door_share
         );
         s
     }
@@ -111,7 +123,8 @@ impl UpdateRow {
         let f: Vec<&str> = line.trim_end().split(',').collect();
         let old = f.len() == OLD_FIELDS;
         let no_ball = old || f.len() == EXIT_FIELDS;
-        if f.len() != HEADER.split(',').count() && !no_ball {
+        let no_key = no_ball || f.len() == BALL_FIELDS;
+        if f.len() != HEADER.split(',').count() && !no_key {
             return None;
         }
         let x = |i: usize| f[i].parse::<f64>().ok();
@@ -135,6 +148,8 @@ impl UpdateRow {
             exit_share: if old { f64::NAN } else { x(15)? },
             exit_goal_share: if old { f64::NAN } else { x(16)? },
             ball_goal_share: if no_ball { f64::NAN } else { x(17)? },
+            key_share: if no_key { f64::NAN } else { x(18)? },
+            door_share: if no_key { f64::NAN } else { x(19)? },
         })
     }
 
@@ -150,6 +165,8 @@ impl UpdateRow {
         if self.episodes > 0 {
             v.push(("charts/episodic_return", self.episodic_return));
             v.push(("charts/exit_share", self.exit_share));
+            v.push(("charts/key_share", self.key_share));
+            v.push(("charts/door_share", self.door_share));
         }
         if hierarchy {
             v.extend([
@@ -253,7 +270,11 @@ mod tests {
             env_steps: update * 1920,
             wall_seconds: update as f64 * 0.25,
             episodes: (update % 3) as usize,
-            episodic_return: if update % 3 == 0 { f64::NAN } else { 0.5 },
+            episodic_return: if update.is_multiple_of(3) {
+                f64::NAN
+            } else {
+                0.5
+            },
             policy_loss: -0.01,
             value_loss: 0.04,
             entropy: 1.05,
@@ -284,9 +305,16 @@ mod tests {
             exit_share: 0.125,
             exit_goal_share: 0.5,
             ball_goal_share: 0.25,
+            key_share: 0.375,
+            door_share: 0.0625,
             ..row(4)
         };
         assert_eq!(UpdateRow::parse(&r.csv_line()), Some(r));
+        // The 18 fields of the version before the key and door columns.
+        let ball = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5,0.25";
+        let b = UpdateRow::parse(ball).expect("a row without the key column reads");
+        assert_eq!(b.ball_goal_share, 0.25);
+        assert!(b.key_share.is_nan() && b.door_share.is_nan());
         // The 17 fields of the version before the ball column.
         let exit =
             "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5";
@@ -339,8 +367,9 @@ mod tests {
 
         // The events hold the same scalars (wall times aside): one
         // TensorBoard file, the version record, then one record per
-        // scalar, with `charts/episodic_return` and `charts/exit_share`
-        // only where episodes ended.
+        // scalar, with `charts/episodic_return`, `charts/exit_share`,
+        // `charts/key_share` and `charts/door_share` only where episodes
+        // ended.
         let events = |d: &Path| {
             let files: Vec<_> = std::fs::read_dir(d.join(TENSORBOARD_DIR))
                 .unwrap()
@@ -352,7 +381,7 @@ mod tests {
         let (ra, rb) = (records(&ea), records(&eb));
         assert_eq!(ra.len(), rb.len());
         let with_return = (1..=6).filter(|u| u % 3 != 0).count();
-        assert_eq!(ra.len(), 1 + 6 * 4 + 2 * with_return);
+        assert_eq!(ra.len(), 1 + 6 * 4 + 4 * with_return);
         let tagged = |rs: &[&[u8]], tag: &str| {
             rs.iter()
                 .filter(|r| r.windows(tag.len()).any(|w| w == tag.as_bytes()))

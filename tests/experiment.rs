@@ -490,4 +490,21 @@ fn table_refuses_a_summary_counted_twice_and_an_out_that_is_a_directory() {
         );
         std::fs::remove_file(&copy).unwrap();
     }
+
+    // Another grid's result set below the root (its own maze folders) is
+    // not read, so not counted twice, and the table says it left it out.
+    let other = d.join("results/goal-map/small/multigoal/a2c");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::copy(&committed, other.join("seed-0.json")).unwrap();
+    let out = worldgraph(d, &["table", "results", "--out", "out/results.md"]);
+    let (_, err) = ok(&out);
+    assert!(
+        err.contains("results/goal-map") && err.contains("not read"),
+        "{err}"
+    );
+    let md = std::fs::read_to_string(d.join("out/results.md")).unwrap();
+    assert!(
+        md.contains("from the 1 run summaries") && md.contains("`results/goal-map`"),
+        "{md}"
+    );
 }

@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::vae::{AgentPose, Trajectory};
 
-/// Every transition observed so far: [`transition_key`] of (pose, action)
+/// Every transition observed so far: `transition_key` of (pose, action)
 /// → the pose it led to as `(cell, direction, carried)`. Serialised as that
 /// map (the checkpoint's `experience` field).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

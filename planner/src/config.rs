@@ -16,7 +16,7 @@ const _: () = assert!(MAX_NODES < shm_schemas::NO_PIVOT as usize);
 /// Most walk steps from one node (`walks_per_node × walk_len`).
 pub const MAX_STEPS_PER_NODE: u64 = 1 << 31;
 
-/// Where the graph's nodes come from (paper section 4, "Wide-then-Narrow":
+/// Where the graph's nodes come from (section 4, "Wide-then-Narrow":
 /// `V_all`, `V_rand` or `V_p`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
@@ -84,7 +84,7 @@ pub struct PlannerConfig {
     /// The task whose rules the walks follow (balls are collected by
     /// stepping on them in the MultiGoal tasks and block the way in
     /// Door-Key). MultiGoal-Stochastic walks as MultiGoal: the graph is of
-    /// the static maze, its moving lava is left to `π_g` (paper section 4.3, "Execution").
+    /// the static maze, its moving lava is left to `π_g` (section 4.3, "Execution").
     pub task: Task,
 }
 

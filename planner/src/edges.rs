@@ -79,7 +79,7 @@ pub struct EdgePath {
 }
 
 impl EdgePath {
-    /// The edge weight: the path's action count (paper section 3.3).
+    /// The edge weight: the path's action count (section 3.3).
     #[inline]
     pub fn weight(&self) -> u32 {
         self.actions.len() as u32

@@ -40,7 +40,7 @@ impl Backoff {
     #[inline]
     pub fn snooze(&mut self) {
         self.polls = self.polls.wrapping_add(1);
-        // Reading the clock costs ~20 ns: do it every 16 polls while spinning.
+        // Reading the clock is not free: do it every 16 polls while spinning.
         if self.polls < 64 || !self.polls.is_multiple_of(16) {
             std::hint::spin_loop();
             return;

@@ -15,7 +15,7 @@
 //!   learner: the environment starts a new episode now (flag `RESET`, reward
 //!   0, no `DONE` flags). It travels in the action batch like any action, so
 //!   both transports support it; discovery uses it to return to the start and
-//!   replay recorded paths to pivotal states (paper section 3.2).
+//!   replay recorded paths to pivotal states (section 3.2).
 //!
 //! ## Episode end and auto-reset
 //! An episode **terminates** at the exit or on lava, and is **truncated** when
@@ -343,7 +343,7 @@ impl Env {
 
     /// Places the agent at `pose` (its cell must be one the agent can stand
     /// on) without changing anything else. Used to start walks from pivotal
-    /// states (paper section 3.2: the agent returns to them by recorded paths;
+    /// states (section 3.2: the agent returns to them by recorded paths;
     /// in simulation the shortcut is exact).
     pub fn teleport(&mut self, pose: Pose) {
         let w = self.shared.layout.width;

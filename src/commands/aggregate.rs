@@ -116,8 +116,13 @@ pub fn section(
             .collect();
         here.sort_by_key(|(c, _)| order(c));
         for (c, v) in here {
-            let e = iqm_interval(&[v.clone()], LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED)
-                .expect("a cell has runs");
+            let e = iqm_interval(
+                std::slice::from_ref(v),
+                LEVEL,
+                BOOTSTRAP_REPS,
+                BOOTSTRAP_SEED,
+            )
+            .expect("a cell has runs");
             let _ = writeln!(
                 md,
                 "| {m} | {t} | {} | {} | {} |",

@@ -36,11 +36,12 @@ use serde::Serialize;
 use shm_schemas::EnvMeta;
 use sim::{BatchEnv, StepOut};
 
-use super::run::{RunCmdArgs, teardown};
+use super::run::RunCmdArgs;
 use crate::latency::Latencies;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{OnPeerDeath, RunArgs};
+use crate::shutdown::teardown;
 use crate::world::WorldArgs;
 
 /// `bench pipeline` options.
@@ -258,9 +259,23 @@ fn sim_progress(dir: &std::path::Path) -> Option<(f64, u64)> {
     Some((line["t"].as_f64()?, line["env_steps"].as_u64()?))
 }
 
-/// Waits (up to 5 s) for a progress line newer than `after`.
+/// How long the first progress line may take: the three processes start,
+/// load libtorch and open their services (slow on a loaded machine, e.g.
+/// beside a test suite's other tests).
+const STARTUP_WAIT: Duration = Duration::from_secs(60);
+/// How long a later progress line may take before the pipeline counts as
+/// stalled.
+const STALL_WAIT: Duration = Duration::from_secs(20);
+
+/// Waits for a progress line newer than `after` (the first: up to
+/// [`STARTUP_WAIT`]; later ones: up to [`STALL_WAIT`]).
 fn next_progress(dir: &std::path::Path, after: Option<(f64, u64)>) -> anyhow::Result<(f64, u64)> {
-    let until = Instant::now() + Duration::from_secs(5);
+    let until = Instant::now()
+        + if after.is_none() {
+            STARTUP_WAIT
+        } else {
+            STALL_WAIT
+        };
     loop {
         if let Some(p) = sim_progress(dir)
             && after.is_none_or(|a| p.0 > a.0)

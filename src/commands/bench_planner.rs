@@ -1,5 +1,5 @@
 //! `worldgraph bench planner`: route-query latency through the all-pairs
-//! dynamic-programming tables (paper section 3.3), against a Dijkstra search
+//! dynamic-programming tables (section 3.3), against a Dijkstra search
 //! per query on the same edge graph measured in the same run, and the time
 //! to rebuild all-pairs shortest paths (Floyd–Warshall).
 

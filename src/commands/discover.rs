@@ -13,11 +13,11 @@ use serde::Serialize;
 use sim::render::{Canvas, Rgb, draw_grid, object_color};
 use sim::{Layout, Maze, Object, Task};
 
-use super::run::teardown;
 use crate::chart::{
     LegendEntry, LineChart, Mark, Series, XScale, blended, captioned, object_entries,
 };
 use crate::pipeline::{Pipeline, Role, world_words};
+use crate::shutdown::teardown;
 use crate::world::WorldArgs;
 
 /// `discover` options.
@@ -758,7 +758,7 @@ pub const RANDOM_GRAPHS: usize = 5;
 /// Random pairs of cells routed per graph.
 pub const ROUTE_PAIRS: usize = 500;
 
-/// `V_p` against `V_rand` on the maze's structure (paper section 5,
+/// `V_p` against `V_rand` on the maze's structure (section 5,
 /// "Benefit of Learned Pivotal States").
 struct StructureReport {
     passages: usize,

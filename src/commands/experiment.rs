@@ -15,8 +15,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
@@ -743,19 +742,6 @@ fn unmatched_filters(grid: &Grid, a: &ExperimentArgs) -> Vec<String> {
     out
 }
 
-/// Set on SIGINT, SIGTERM or SIGHUP: stop the children and exit.
-fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for sig in [
-        signal_hook::consts::SIGINT,
-        signal_hook::consts::SIGTERM,
-        signal_hook::consts::SIGHUP,
-    ] {
-        signal_hook::flag::register(sig, Arc::clone(&stop))?;
-    }
-    Ok(stop)
-}
-
 /// Runs `worldgraph experiment`.
 pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(summary) = &a.reproduce {
@@ -894,7 +880,7 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
         }
     }
 
-    let stop = stop_flag()?;
+    let stop = crate::shutdown::stop_flag_with_hangup()?;
     let bar = crate::progress::bar(queue.len() as u64, "experiment");
     let mut running: Vec<(usize, Child, Instant)> = Vec::new();
     let mut failed: Vec<(usize, String)> = Vec::new();

@@ -13,6 +13,7 @@ pub mod run;
 pub mod run_dir;
 pub mod sim;
 pub mod soak;
+pub mod soak_report;
 pub mod soak_training;
 pub mod table;
 pub mod train;

@@ -7,18 +7,18 @@
 //! and prints a summary table from the processes' reports.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use clap::Args;
 use iceoryx2::prelude::ipc;
-use shm_schemas::service::{RunName, run_config, teardown_run};
+use shm_schemas::service::{RunName, run_config};
 
 use crate::pipeline::{Pipeline, Role, world_words};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{EXIT_CONFIG, EXIT_PEER_DIED, OnPeerDeath, RunArgs};
+use crate::shutdown::{stop_flag, teardown};
 use crate::world::WorldArgs;
 
 /// `run` options.
@@ -214,32 +214,6 @@ pub fn refuse_live_run(run: &RunName) -> anyhow::Result<()> {
 pub const FAST_FAILURE: Duration = Duration::from_secs(3);
 /// Consecutive fast failures of one role after which `run` gives up.
 pub const MAX_FAST_FAILURES: u32 = 3;
-
-/// Installs SIGINT/SIGTERM handlers that set the returned flag.
-pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(sig, Arc::clone(&stop))?;
-    }
-    Ok(stop)
-}
-
-/// Tears the run's shared memory down; returns the files left behind.
-pub fn teardown(run: &str) -> anyhow::Result<Vec<PathBuf>> {
-    let config = run_config(&RunName::new(run)?)?;
-    // Peers exit within moments of each other; give the registry a moment.
-    let until = Instant::now() + Duration::from_secs(3);
-    loop {
-        match teardown_run::<ipc::Service>(&config) {
-            Ok(left) => return Ok(left),
-            Err(e) if Instant::now() < until => {
-                tracing::debug!("teardown: {e}; retrying");
-                std::thread::sleep(Duration::from_millis(100));
-            }
-            Err(e) => return Err(e.into()),
-        }
-    }
-}
 
 fn read_json(dir: &Path, name: &str) -> Option<serde_json::Value> {
     serde_json::from_slice(&std::fs::read(dir.join(name)).ok()?).ok()

@@ -28,15 +28,15 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-use serde::Serialize;
 
-use super::run::{RunCmdArgs, stop_flag, teardown};
-use super::soak_training::{KillCost, TrainingReport};
+use super::run::RunCmdArgs;
+use super::soak_report::{KillCost, Recovery, SoakReport};
 use crate::pipeline::Role;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;
 use crate::roles::{OnPeerDeath, RunArgs};
+use crate::shutdown::{stop_flag, teardown};
 use crate::world::WorldArgs;
 
 /// Growth of a process's resident set above which the soak fails (KiB).
@@ -104,54 +104,6 @@ pub struct SoakArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-/// One kill and what followed.
-#[derive(Debug, Serialize)]
-pub struct Recovery {
-    /// Seconds into the soak.
-    pub at_s: f64,
-    /// The process killed.
-    pub role: Role,
-    /// Its pid.
-    pub pid: Option<u32>,
-    /// Seconds from the kill until batches flowed again (None: not within the limit).
-    pub recovered_after_s: Option<f64>,
-    /// With --learner-trains: what the kill cost the training.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub training: Option<KillCost>,
-}
-
-/// The soak report.
-#[derive(Debug, Serialize)]
-pub struct SoakReport {
-    /// Minutes run.
-    pub minutes: f64,
-    /// Batches published by all sim processes.
-    pub batches: u64,
-    /// Batches lost (learner streams).
-    pub lost: u64,
-    /// Batches reordered (learner streams).
-    pub reordered: u64,
-    /// Times a learner saw the sim start over.
-    pub sim_restarts_seen: u64,
-    /// Kills and recoveries.
-    pub recoveries: Vec<Recovery>,
-    /// Largest resident-set growth per role (KiB), over processes that lived ≥ 60 s.
-    pub rss_growth_kib: BTreeMap<String, i64>,
-    /// Largest resident set per role (KiB).
-    pub rss_max_kib: BTreeMap<String, u64>,
-    /// Per soak minute: the median of the sims' 250 ms round-trip p99s (µs).
-    pub roundtrip_p99_us_per_minute: Vec<f64>,
-    /// Per soak minute: the worst 250 ms round-trip p99 (µs).
-    pub roundtrip_p99_us_worst_interval_per_minute: Vec<f64>,
-    /// The run's shared-memory files left after teardown.
-    pub shm_left_behind: Vec<String>,
-    /// With --learner-trains: iterations, checkpoints, what kills cost.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub training: Option<TrainingReport>,
-    /// Everything held.
-    pub ok: bool,
 }
 
 #[derive(Debug, Default)]

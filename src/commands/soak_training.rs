@@ -20,50 +20,13 @@ use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;
 
-use serde::Serialize;
-
-use super::soak::Recovery;
+use super::soak_report::{KillCost, Recovery, TrainingReport};
 use crate::pipeline::Role;
 use crate::roles::learner_train::{CHECKPOINT_DIR, TRAIN_LOG, open};
 use crate::world::WorldArgs;
 
 /// How long after a kill its training pause is looked for.
 pub const PAUSE_WINDOW_S: f64 = 10.0;
-
-/// What one kill cost the training.
-#[derive(Debug, Serialize)]
-pub struct KillCost {
-    /// Learner kills: iterations done since its last checkpoint (None when
-    /// no successor started within the soak).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub iterations_lost: Option<u64>,
-    /// The longest time (s) without an iteration finishing in the
-    /// [`PAUSE_WINDOW_S`] after the kill (None: no iteration after it).
-    pub pause_s: Option<f64>,
-}
-
-/// The soak's training section.
-#[derive(Debug, Serialize)]
-pub struct TrainingReport {
-    /// Checkpoint interval (iterations).
-    pub checkpoint_every: u64,
-    /// Learner processes that trained.
-    pub learner_processes: usize,
-    /// Iterations finished by all learner processes, lost ones included.
-    pub iterations_run: u64,
-    /// Iterations in the final checkpoint (the work kept).
-    pub iterations_kept: u64,
-    /// Iterations lost to learner kills, in all.
-    pub iterations_lost: u64,
-    /// Checkpoints written by all learner processes.
-    pub checkpoints_written: u64,
-    /// Rollouts dropped because the sim died or restarted during them.
-    pub rollouts_dropped: u64,
-    /// Median seconds between two iterations of one process.
-    pub median_iteration_s: f64,
-    /// Why the final checkpoint could not be loaded (None: it loads).
-    pub final_checkpoint_error: Option<String>,
-}
 
 #[derive(Debug, Default)]
 struct ProcLog {

@@ -266,11 +266,30 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         a.out.display(),
         a.out.display()
     );
-    let runs = read_all_runs(&a.results)?;
+    let (runs, nested) = read_all_runs(&a.results)?;
+    for n in &nested {
+        eprintln!(
+            "table: {} is a result set of its own (another grid or budget), not read: `worldgraph table {}`",
+            n.display(),
+            n.display()
+        );
+    }
     anyhow::ensure!(
         !runs.is_empty(),
-        "no run summaries under {} (`worldgraph experiment GRID.toml` writes them)",
-        a.results.display()
+        "no run summaries under {} (`worldgraph experiment GRID.toml` writes them){}",
+        a.results.display(),
+        if nested.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; result sets below it: {}",
+                nested
+                    .iter()
+                    .map(|n| n.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
     );
     anyhow::ensure!(
         a.threshold > 0.0 && a.threshold <= 1.0,
@@ -303,8 +322,20 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
          (written by `worldgraph experiment`, grids in `experiments/`); do not edit by hand.\n",
         a.results.display(),
         runs.len(),
-        a.results.display()
+        a.results.display().to_string().trim_end_matches('/')
     );
+    if !nested.is_empty() {
+        let _ = writeln!(
+            md,
+            "Result sets of other grids or budgets below it, not read here (a table never mixes \
+             budgets): {}.\n",
+            nested
+                .iter()
+                .map(|n| format!("`{}`", n.display()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let _ = writeln!(
         md,
         "**Protocol** (section 5): every run trains on its own seed; validation on {} seeds \

@@ -707,9 +707,9 @@ fn save_state(
     let [weights, record, tensors, envs] = checkpoint_files(state.segments_done);
     write_atomic(&ckpt.join(weights), &agent.to_bytes()?)?;
     if let Some(snapshot) = env.and_then(|e| e.snapshot()) {
-        let (json, t) = agent.save_controller()?;
-        write_atomic(&ckpt.join(record), &json)?;
-        write_atomic(&ckpt.join(tensors), &t)?;
+        let saved = agent.save_controller()?;
+        write_atomic(&ckpt.join(record), &saved.record)?;
+        write_atomic(&ckpt.join(tensors), &saved.tensors)?;
         write_atomic(&ckpt.join(envs), &serde_json::to_vec(&snapshot)?)?;
     }
     if let Some(b) = best {
@@ -1075,6 +1075,16 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
                     },
                     exit_goal_share: s.exit_goal_share,
                     ball_goal_share: s.ball_goal_share,
+                    key_share: if s.episodes > 0 {
+                        s.key_share
+                    } else {
+                        f64::NAN
+                    },
+                    door_share: if s.episodes > 0 {
+                        s.door_share
+                    } else {
+                        f64::NAN
+                    },
                 })?;
             }
             bar.inc(1);
@@ -1124,7 +1134,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     drop(env);
     if let Some((mut p, run_name)) = pipeline {
         p.stop_all(std::time::Duration::from_secs(3));
-        super::run::teardown(&run_name)?;
+        crate::shutdown::teardown(&run_name)?;
     }
     bar.finish_and_clear();
     let _ = started;

@@ -6,10 +6,9 @@
 //! (sim's publish → this process's receive, from the header's send time),
 //! `route_client` (request → response, when `--route-every` is set).
 
-use std::io::Write;
 use std::time::{Duration, Instant};
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use iceoryx2::prelude::ipc;
 use learner::a2c::net::ActorCriticConfig;
 use learner::batch_env::{BatchEnvironment, EnvError};
@@ -19,38 +18,15 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 use shm_schemas::ObsShape;
 
-use super::learner_train::{TrainSummary, Trainer, check_slices};
+use super::learner_train::{Trainer, check_slices};
+pub use super::policy_loop::PolicyKind;
+use super::policy_loop::{Served, StreamLog, TrainSummary, after_sim_death};
 use super::shm_env::{ShmEnv, ShmEnvOptions, StreamStats};
 use super::{
-    EXIT_PEER_DIED, LEARNER_NODE, OnPeerDeath, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE,
-    config_exit,
+    EXIT_PEER_DIED, LEARNER_NODE, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE, config_exit,
 };
 use crate::latency::Latencies;
 use crate::world::WorldArgs;
-
-/// Which policy chooses the actions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
-pub enum PolicyKind {
-    /// Uniformly random actions (the benchmark's null policy).
-    Random,
-    /// The A2C-LSTM actor-critic's forward pass (CNN encoder + LSTM core).
-    ActorCritic,
-    /// Trains π_g (the goal-conditioned policy) by A2C on the stream, with
-    /// checkpoints in `<run dir>/learner-train/` that a restarted learner
-    /// resumes from; needs `--slices 1`.
-    TrainGcp,
-}
-
-impl PolicyKind {
-    /// The name on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            PolicyKind::Random => "random",
-            PolicyKind::ActorCritic => "actor-critic",
-            PolicyKind::TrainGcp => "train-gcp",
-        }
-    }
-}
 
 /// `learner serve` options.
 #[derive(Debug, Clone, Args)]
@@ -100,53 +76,6 @@ pub struct LearnerReport {
     /// With `train-gcp`: the training this process did and kept.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub training: Option<TrainSummary>,
-}
-
-/// What a policy loop did (the report's figures).
-pub struct Served {
-    /// Policy name.
-    pub policy: String,
-    /// Batches answered.
-    pub batches: u64,
-    /// Episodes finished.
-    pub episodes: u64,
-    /// Sum of their returns.
-    pub return_sum: f64,
-    /// Routes received with status Ok.
-    pub routes_ok: u64,
-    /// Route requests sent.
-    pub routes_requested: u64,
-    /// Why the loop ended.
-    pub stopped_by: String,
-    /// With `train-gcp`: the training summary.
-    pub training: Option<TrainSummary>,
-}
-
-/// `learner.stream.jsonl`: appended by every learner process of the run,
-/// one line every 250 ms or so with its pid: what a soak test sums up even
-/// for a killed learner.
-pub struct StreamLog {
-    file: std::fs::File,
-    pid: u32,
-}
-
-impl StreamLog {
-    fn open(dir: &std::path::Path) -> std::io::Result<StreamLog> {
-        let file = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(dir.join("learner.stream.jsonl"))?;
-        Ok(StreamLog {
-            file,
-            pid: std::process::id(),
-        })
-    }
-
-    /// Appends one line of `s`.
-    pub fn write(&mut self, s: StreamStats) -> std::io::Result<()> {
-        let line = serde_json::json!({ "pid": self.pid, "stream": s });
-        writeln!(self.file, "{line}")
-    }
 }
 
 /// Runs the learner role until stopped; returns the process exit code.
@@ -387,26 +316,4 @@ fn serve_policy(
         stopped_by,
         training: None,
     })
-}
-
-/// After the sim died (`detail`): waits for a sim to rejoin when the run
-/// says so (`--on-peer-death wait`). Returns why to stop, or `None` to go on.
-pub fn after_sim_death(
-    ctx: &RunCtx,
-    env: &mut ShmEnv<ipc::Service>,
-    detail: &str,
-) -> anyhow::Result<Option<&'static str>> {
-    eprintln!("learner: the sim is gone ({detail})");
-    if ctx.on_peer_death == OnPeerDeath::Exit {
-        return Ok(Some("sim died"));
-    }
-    eprintln!("learner: waiting for a sim to rejoin");
-    match env.wait_for_peer(Duration::from_secs(3600)) {
-        Ok(()) => {
-            eprintln!("learner: a sim rejoined at batch {}", env.observe().seq);
-            Ok(None)
-        }
-        Err(EnvError::Interrupted) => Ok(Some("stop request")),
-        Err(e) => Err(e.into()),
-    }
 }

@@ -44,7 +44,7 @@ use serde::{Deserialize, Serialize};
 use sim::Layout;
 
 use super::RunCtx;
-use super::learner::{PolicyKind, Served, StreamLog, after_sim_death};
+use super::policy_loop::{PolicyKind, Served, StreamLog, TrainSummary, after_sim_death};
 use super::shm_env::ShmEnv;
 use crate::latency::Latencies;
 
@@ -199,23 +199,6 @@ pub struct Trainer {
     last_checkpoint: u64,
     checkpoints_written: u64,
     rollouts_dropped: u64,
-}
-
-/// What a training learner did, for `learner.report.json`.
-#[derive(Debug, Serialize)]
-pub struct TrainSummary {
-    /// The iteration this process resumed from (0: a fresh π_g).
-    pub resumed_from: u64,
-    /// Iterations done at exit (all processes' kept work).
-    pub iterations: u64,
-    /// Environment steps at exit.
-    pub env_steps: u64,
-    /// Checkpoints this process wrote.
-    pub checkpoints_written: u64,
-    /// The last checkpointed iteration.
-    pub last_checkpoint: u64,
-    /// Rollouts this process dropped because the sim died or restarted.
-    pub rollouts_dropped: u64,
 }
 
 fn unix_ms() -> u64 {

@@ -5,6 +5,8 @@
 //!   straight into loaned shared-memory samples.
 //! - [`learner`]: reads observation batches in place, runs a policy, sends
 //!   action batches.
+//!   Its policy loops (serving, and `train-gcp`'s in [`learner_train`])
+//!   share what [`policy_loop`] holds.
 //! - [`planner`]: reads the same stream (coverage), owns the world graph,
 //!   answers route requests, publishes graph snapshots.
 //!
@@ -30,6 +32,7 @@ use shm_schemas::service::{RunName, list_nodes, run_config};
 pub mod learner;
 pub mod learner_train;
 pub mod planner;
+pub mod policy_loop;
 pub mod shm_env;
 pub mod sim;
 

@@ -1,6 +1,6 @@
 //! The planner process: reads the same observation stream as the learner
 //! (visitation counts, so a user can see coverage), owns the world graph
-//! (paper section 3.3), answers route requests by request-response and
+//! (section 3.3), answers route requests by request-response and
 //! publishes graph snapshots for readers that join late.
 //!
 //! The planner never stalls the simulator: it is a passive reader of the

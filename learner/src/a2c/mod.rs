@@ -28,6 +28,7 @@
 
 pub mod encoder;
 pub mod gemm;
+mod grad_path;
 pub mod input;
 pub mod kernels;
 pub mod net;

@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use tch::nn::{self, Module};
 use tch::{Device, Kind, Tensor};
 
+use super::grad_path::GradPath;
 use super::input::{BASE_CHANNELS, CellInput, FirstLayer, first_conv};
 
 /// Sizes of an actor-critic (CPU-sized defaults).
@@ -492,22 +493,22 @@ pub fn trunk_macs(trunk: &Trunk, bag: Option<f64>) -> (f64, f64) {
 /// convolution, which needs no input gradient); on the per-step path one
 /// forward with its backward. Table rows of the fast first layer count one
 /// FLOP each (an addition), a multiply-add two.
-pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: super::rollout::GradPath) -> f64 {
+pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: GradPath) -> f64 {
     let heads = trunk.hidden as f64 * (num_actions as f64 + 1.0);
     match path {
-        super::rollout::GradPath::Recompute => {
+        GradPath::Recompute => {
             // Ten table rows per position (nine taps, and the agent's,
             // goals' and key's few).
             let (c1, rest) = trunk_macs(trunk, Some(10.0));
             let fwd = 2.0 * (c1 + rest + heads);
             2.0 * fwd + 2.0 * c1 + 4.0 * (rest + heads)
         }
-        super::rollout::GradPath::PerStep | super::rollout::GradPath::RustEncoder => {
+        GradPath::PerStep | GradPath::RustEncoder => {
             let (c1, rest) = trunk_macs(trunk, Some(10.0));
             let fwd = 2.0 * (c1 + rest + heads);
             fwd + 2.0 * c1 + 4.0 * (rest + heads)
         }
-        super::rollout::GradPath::Plain => {
+        GradPath::Plain => {
             let (c1, rest) = trunk_macs(trunk, None);
             let fwd = 2.0 * (c1 + rest + heads);
             fwd + 2.0 * c1 + 4.0 * (rest + heads)

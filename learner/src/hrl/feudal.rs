@@ -28,7 +28,7 @@
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
-use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead};
+use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead, Window};
 use crate::a2c::input::CellInput;
 use crate::a2c::net::{LstmState, Trunk};
 use crate::a2c::rollout::floats;
@@ -118,12 +118,43 @@ pub struct DecisionQueue {
 /// output must learn each ball-to-goal mapping separately. The last layer
 /// starts at zero: an untrained map leaves the head's distribution as it
 /// is.
+///
+/// For WN the map reaches both of the Manager's choices when it is given
+/// the windows of `V` ([`GoalMap::with_windows`]): `π^n`'s logit of a window
+/// cell gains the map's logit of that cell, and `π^ω`'s logit of a wide
+/// goal gains the log-sum-exp of the map over its window, the log of the
+/// mass its narrow goals would add. Without windows `π^ω` reads the map at
+/// the candidates' own cells only and `π^n` not at all, so "a ball lies in
+/// this window" reaches neither choice.
 #[derive(Debug)]
 pub struct GoalMap {
     conv1: nn::Conv2D,
     conv2: nn::Conv2D,
     /// WN: the cells of `V`, whose logits `π^ω` reads; FN: every cell.
     cells: Option<Tensor>,
+    /// WN with windows: the cells of each candidate's window.
+    windows: Option<WindowCells>,
+}
+
+/// The cells of every candidate's window, `[|V|, N·N]` (slots outside the
+/// grid or on a wall are masked).
+#[derive(Debug)]
+struct WindowCells {
+    /// Cell indices, 0 at masked slots.
+    cells: Tensor,
+    /// Which slots are valid narrow goals.
+    valid: Tensor,
+}
+
+/// The goal map's logits for one batch of Manager decisions.
+#[derive(Debug)]
+pub struct GoalBias {
+    /// Added to the goal head: FN's cells `[N, H·W]` or `π^ω`'s candidates
+    /// `[N, |V|]`.
+    pub wide: Tensor,
+    /// WN with windows: the map at every candidate's window cells, `[N,
+    /// |V|, N·N]`, for `π^n` ([`WideNarrowHead::narrow_bias`]).
+    pub windows: Option<Tensor>,
 }
 
 impl GoalMap {
@@ -146,7 +177,28 @@ impl GoalMap {
             conv2: nn::conv2d(p / "conv2", channels, 1, 3, zero),
             cells: cells
                 .map(|c| Tensor::from_slice(&c.iter().map(|&x| i64::from(x)).collect::<Vec<_>>())),
+            windows: None,
         }
+    }
+
+    /// The map over the windows of `candidates` too (WN, type docs): `π^ω`
+    /// reads each window's log-sum-exp, `π^n` each window cell.
+    pub fn with_windows(mut self, window: &Window, candidates: &[u32]) -> GoalMap {
+        let mut cells = Vec::with_capacity(candidates.len() * window.len());
+        let mut valid = Vec::with_capacity(candidates.len() * window.len());
+        for &centre in candidates {
+            let ok = window.valid(centre);
+            for (k, &v) in ok.iter().enumerate() {
+                cells.push(window.cell(centre, k).map_or(0, i64::from));
+                valid.push(v);
+            }
+        }
+        let rows = candidates.len() as i64;
+        self.windows = Some(WindowCells {
+            cells: Tensor::from_slice(&cells).view([rows, -1]),
+            valid: Tensor::from_slice(&valid).view([rows, -1]),
+        });
+        self
     }
 
     /// The logits `[N, cells]` of the observations `input`.
@@ -156,16 +208,58 @@ impl GoalMap {
 
     /// The logits `[N, cells]` of dense one-hot planes `[N, C, H, W]`.
     pub fn logits_dense(&self, planes: &Tensor) -> Tensor {
+        self.bias_dense(planes).wide
+    }
+
+    /// The map's logits for the goal head of dense one-hot planes `[N, C,
+    /// H, W]` (type docs).
+    pub fn bias_dense(&self, planes: &Tensor) -> GoalBias {
         let map = planes
             .apply(&self.conv1)
             .relu()
             .apply(&self.conv2)
             .flatten(1, -1);
-        match &self.cells {
+        if let Some(w) = &self.windows {
+            let (n, rows) = (map.size()[0], w.cells.size()[0]);
+            let at = map.index_select(1, &w.cells.view([-1])).view([n, rows, -1]);
+            let masked = at.masked_fill(&w.valid.logical_not().unsqueeze(0), -1e9);
+            return GoalBias {
+                wide: masked.logsumexp([2], false),
+                windows: Some(at),
+            };
+        }
+        let wide = match &self.cells {
             Some(c) => map.index_select(1, c),
             None => map,
+        };
+        GoalBias {
+            wide,
+            windows: None,
         }
     }
+}
+
+/// One acting step of the [`Manager`] ([`Manager::act`]).
+#[derive(Debug)]
+pub struct ManagerStep {
+    /// The core state after the step.
+    pub state: LstmState,
+    /// `V(s)` of each observation.
+    pub values: Vec<f32>,
+    /// The core outputs `h_t` (`[S, hidden]`) the goal head reads.
+    pub h: Tensor,
+}
+
+/// The Manager's A2C loss over its decision queues ([`Manager::loss`]).
+#[derive(Debug)]
+pub struct ManagerLoss {
+    /// The loss to back-propagate.
+    pub loss: Tensor,
+    /// Its figures.
+    pub figures: LossFigures,
+    /// Each environment's core state before its interval under way: the
+    /// `init` of the next update.
+    pub next_init: LstmState,
 }
 
 /// The Manager: a trunk without goal channel, a value head, a goal head
@@ -201,16 +295,30 @@ impl Manager {
     /// The Manager with a goal map under `p / "goal_map"` (the cells of `V`
     /// for WN, every cell for FN); created after the rest, so the other
     /// weights are those of a Manager without one.
-    pub fn with_goal_map(mut self, p: &nn::Path, channels: i64, cells: Option<&[u32]>) -> Manager {
+    /// For WN, `windows` extends the map over the windows of `V` to `π^n`
+    /// ([`GoalMap::with_windows`]).
+    pub fn with_goal_map(
+        mut self,
+        p: &nn::Path,
+        channels: i64,
+        cells: Option<&[u32]>,
+        windows: Option<&Window>,
+    ) -> Manager {
         let planes = self.trunk.in_channels();
-        self.goal_map = Some(GoalMap::new(&(p / "goal_map"), planes, channels, cells));
+        let map = GoalMap::new(&(p / "goal_map"), planes, channels, cells);
+        self.goal_map = Some(match (windows, cells) {
+            (Some(w), Some(v)) => map.with_windows(w, v),
+            _ => map,
+        });
         self
     }
 
-    /// The goal map's logits `[N, goals]` of `input` (`None` without a
-    /// map), with gradient unless under `no_grad`.
-    pub fn goal_bias(&self, input: &CellInput) -> Option<Tensor> {
-        self.goal_map.as_ref().map(|m| m.logits(input))
+    /// The goal map's logits of `input` (`None` without a map), with
+    /// gradient unless under `no_grad`.
+    pub fn goal_bias(&self, input: &CellInput) -> Option<GoalBias> {
+        self.goal_map
+            .as_ref()
+            .map(|m| m.bias_dense(&input.to_dense()))
     }
 
     /// The FN head over a `width × height` grid with `valid` subgoal cells.
@@ -237,14 +345,17 @@ impl Manager {
     }
 
     /// One acting step (no gradient) on `input` (`S` observations) from
-    /// `state` (`[S, hidden]`): the next state, the values and the core
-    /// outputs.
-    pub fn act(&self, input: &CellInput, state: &LstmState) -> (LstmState, Vec<f32>, Tensor) {
+    /// `state` (`[S, hidden]`).
+    pub fn act(&self, input: &CellInput, state: &LstmState) -> ManagerStep {
         tch::no_grad(|| {
             let next = self.trunk.step(&self.trunk.features(input), state);
             let v = self.value.forward(&next.h).squeeze_dim(-1);
             let h = next.h.shallow_clone();
-            (next, floats(&v), h)
+            ManagerStep {
+                state: next,
+                values: floats(&v),
+                h,
+            }
         })
     }
 
@@ -257,7 +368,7 @@ impl Manager {
             input.push_final_env(obs, e, None);
         }
         let idx = Tensor::from_slice(&envs.iter().map(|&e| e as i64).collect::<Vec<_>>());
-        self.act(&input, &state.select(&idx)).1
+        self.act(&input, &state.select(&idx)).values
     }
 
     /// FN: the subgoal distribution of core outputs `h`, plus the goal
@@ -280,16 +391,14 @@ impl Manager {
 
     /// The A2C loss of the trainable decisions of `queues` (every complete
     /// one; the interval under way only bootstraps), unrolling the core over
-    /// each environment's decisions from `init`. Returns the loss, its
-    /// figures, and each environment's core state before its interval
-    /// under way (the next `init`).
+    /// each environment's decisions from `init`.
     pub fn loss(
         &self,
         queues: &[DecisionQueue],
         init: &LstmState,
         cfg: &A2cConfig,
         gamma: f64,
-    ) -> (Tensor, LossFigures, LstmState) {
+    ) -> ManagerLoss {
         let b = queues.len();
         let k_max = queues
             .iter()
@@ -363,12 +472,15 @@ impl Manager {
         let bias = self.goal_bias(&input);
         let (log_prob, entropy) = match &self.head {
             ManagerHead::Feudal { .. } => {
-                let pi = self.feudal_policy(&h, bias.as_ref()).expect("feudal head");
+                let pi = self
+                    .feudal_policy(&h, bias.as_ref().map(|b| &b.wide))
+                    .expect("feudal head");
                 (pi.log_prob(&Tensor::from_slice(&wide)), pi.entropy())
             }
             ManagerHead::WideNarrow(head) => head.terms(
                 &h,
-                bias.as_ref(),
+                bias.as_ref().map(|b| &b.wide),
+                bias.as_ref().and_then(|b| b.windows.as_ref()),
                 &Tensor::from_slice(&local).view([k * bb, -1]),
                 &Tensor::from_slice(&valid).view([k * bb, -1]),
                 &Tensor::from_slice(&wide),
@@ -405,7 +517,11 @@ impl Manager {
             h: Tensor::stack(&next_h, 0),
             c: Tensor::stack(&next_c, 0),
         };
-        (loss, figures, next)
+        ManagerLoss {
+            loss,
+            figures,
+            next_init: next,
+        }
     }
 }
 
@@ -439,6 +555,29 @@ mod tests {
         planes
     }
 
+    /// A goal map (seeded by `seed`) trained for `iters` Adam steps to name
+    /// the cell of a ball at `(x, y)` of a `w × h` grid of floor.
+    fn map_trained_on_a_ball(
+        seed: u64,
+        w: i64,
+        h: i64,
+        (x, y): (i64, i64),
+        iters: usize,
+    ) -> GoalMap {
+        let vs = nn::VarStore::new(Device::Cpu);
+        let map = crate::seeding::init_seeded(seed, || {
+            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
+        });
+        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        for _ in 0..iters {
+            let logp = map
+                .logits_dense(&ball_at(w, h, x, y))
+                .log_softmax(-1, Kind::Float);
+            opt.backward_step(&(-logp.get(0).get(y * w + x)));
+        }
+        map
+    }
+
     #[test]
     fn an_untrained_goal_map_leaves_the_goal_head_as_it_is() {
         let vs = nn::VarStore::new(Device::Cpu);
@@ -456,17 +595,7 @@ mod tests {
     #[test]
     fn the_candidates_read_the_map_at_their_own_cells() {
         let (w, h) = (7, 6);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let mut map = crate::seeding::init_seeded(4, || {
-            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
-        });
-        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
-        for _ in 0..40 {
-            let logp = map
-                .logits_dense(&ball_at(w, h, 5, 2))
-                .log_softmax(-1, Kind::Float);
-            opt.backward_step(&(-logp.get(0).get(2 * w + 5)));
-        }
+        let mut map = map_trained_on_a_ball(4, w, h, (5, 2), 40);
         let cells = [3u32, 19, 30, 40];
         let planes = ball_at(w, h, 5, 2);
         let all = map.logits_dense(&planes);
@@ -488,18 +617,8 @@ mod tests {
     #[test]
     fn naming_a_ball_learnt_in_one_place_transfers_to_another() {
         let (w, h) = (9, 9);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let map = crate::seeding::init_seeded(3, || {
-            GoalMap::new(&vs.root(), BASE_CHANNELS as i64, 8, None)
-        });
-        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        let map = map_trained_on_a_ball(3, w, h, (2, 2), 60);
         let cell = |x: i64, y: i64| y * w + x;
-        for _ in 0..60 {
-            let logp = map
-                .logits_dense(&ball_at(w, h, 2, 2))
-                .log_softmax(-1, Kind::Float);
-            opt.backward_step(&(-logp.get(0).get(cell(2, 2))));
-        }
         let p = map
             .logits_dense(&ball_at(w, h, 6, 5))
             .softmax(-1, Kind::Float)
@@ -511,6 +630,58 @@ mod tests {
             "the ball's cell elsewhere has probability {p}, uniform {}",
             1.0 / (w * h) as f64
         );
+    }
+
+    /// With the windows of `V`, a ball near a wide goal (not on it) draws
+    /// `π^ω` to that goal and `π^n` to the ball's slot: the map trained to
+    /// name a ball at one place, then a ball elsewhere, in the window of
+    /// one candidate of three.
+    #[test]
+    fn the_map_over_windows_points_both_choices_at_a_ball_beside_a_wide_goal() {
+        let (w, h) = (13i64, 13i64);
+        let layout = sim::Layout::parse(
+            "open",
+            &(0..h)
+                .map(|y| {
+                    (0..w)
+                        .map(|x| match (x, y) {
+                            (0, _) | (_, 0) => '#',
+                            _ if x == w - 1 || y == h - 1 => '#',
+                            (1, 1) => '>',
+                            (1, 11) => 'E',
+                            _ => '.',
+                        })
+                        .collect::<String>()
+                })
+                .collect::<Vec<_>>()
+                .join("\n"),
+        )
+        .expect("an open room");
+        let window = Window::new(5, &layout);
+        let cell = |x: i64, y: i64| (y * w + x) as u32;
+        let candidates = [cell(3, 3), cell(9, 8), cell(3, 9)];
+        let map = map_trained_on_a_ball(3, w, h, (2, 2), 60).with_windows(&window, &candidates);
+        // The ball two cells right and one down of the second candidate.
+        let bias = map.bias_dense(&ball_at(w, h, 11, 9));
+        assert_eq!(bias.wide.size(), [1, 3]);
+        assert_eq!(bias.wide.get(0).argmax(0, false).int64_value(&[]), 1);
+        let windows = bias.windows.expect("windows");
+        let narrow = WideNarrowHead::narrow_bias(&windows, &Tensor::from_slice(&[1i64]));
+        let ball_slot = window
+            .slot_of(candidates[1], cell(11, 9))
+            .expect("in the window");
+        assert_eq!(
+            narrow.get(0).argmax(0, false).int64_value(&[]),
+            ball_slot as i64
+        );
+        // π^ω's logit is the log-sum-exp of π^n's over the valid slots.
+        let valid = window.valid(candidates[1]);
+        let lse = (0..window.len())
+            .filter(|&k| valid[k])
+            .map(|k| narrow.get(0).get(k as i64).double_value(&[]).exp())
+            .sum::<f64>()
+            .ln();
+        assert!((bias.wide.get(0).get(1).double_value(&[]) - lse).abs() < 1e-4);
     }
 
     #[test]

@@ -13,6 +13,11 @@
 
 use tch::{Tensor, nn};
 
+use super::config::AgentConfig;
+use crate::a2c::input::GOAL_CHANNEL;
+use crate::error::{ConfigError, LearnerError};
+use crate::gcp::GoalConditionedPolicy;
+
 /// What an initialisation copied.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct InitReport {
@@ -77,6 +82,44 @@ pub fn copy_goal_plane(src: &nn::VarStore, dst: &nn::VarStore, goal_channel: usi
             d.narrow(1, k, 1).copy_(&s.narrow(1, g, 1));
         }
     });
+}
+
+/// Initialises an agent of `cfg` from `gcp` (module docs): the Worker's
+/// weights `worker` (encoder, core, heads, the goal plane) and the
+/// Manager's encoder in `manager`. `π_g`'s sizes must be the agent's.
+pub fn from_pi_g(
+    gcp: &GoalConditionedPolicy,
+    cfg: &AgentConfig,
+    worker: &nn::VarStore,
+    manager: Option<&nn::VarStore>,
+) -> Result<InitReport, LearnerError> {
+    let g = gcp.config();
+    if g.conv_channels != cfg.conv_channels || g.hidden != cfg.hidden {
+        return Err(ConfigError::new(
+            "init_from_gcp",
+            format!(
+                "π_g has conv {:?} / hidden {}; the agent has {:?} / {}",
+                g.conv_channels, g.hidden, cfg.conv_channels, cfg.hidden
+            ),
+        )
+        .into());
+    }
+    let mut report = copy_from(
+        gcp.var_store(),
+        worker,
+        &["encoder", "core", "policy", "value"],
+    );
+    copy_goal_plane(gcp.var_store(), worker, GOAL_CHANNEL);
+    if let Some(vs) = manager {
+        let m = copy_from(gcp.var_store(), vs, &["encoder"]);
+        report
+            .copied
+            .extend(m.copied.into_iter().map(|n| format!("manager/{n}")));
+        report
+            .partial
+            .extend(m.partial.into_iter().map(|n| format!("manager/{n}")));
+    }
+    Ok(report)
 }
 
 #[cfg(test)]

@@ -19,11 +19,24 @@
 //! [`Traversal::next_action`] to the environment, and books the step's
 //! rewards for the Manager. A replayed action whose outcome differs from the
 //! recorded one (a world that changed under the route) ends the traversal.
+//!
+//! Inside the agent, `Traverser` runs the traversals of a batch: it starts
+//! them (`Traverser::try_start`), chooses their actions — replayed, or
+//! steered by `π_g` and recorded for its fine-tuning ([`super::steering`])
+//! — and books their steps ([`book_step`]).
 
 use planner::{CellIdx, NodeId, Route, WorldGraph};
-use sim::Object;
+use sim::{Object, ReplayRng, Task, action};
+use tch::nn;
 
+use super::config::AgentConfig;
+use super::steering::{Leg, Steering};
+use super::worker::WorkerGoal;
+use crate::a2c::input::{NO_GOAL, mask};
+use crate::a2c::net::LstmState;
 use crate::batch_env::ObsView;
+use crate::error::{ConfigError, LearnerError};
+use crate::gcp::GoalConditionedPolicy;
 
 /// How a route is executed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -234,6 +247,314 @@ impl Traversal {
                     Progress::Continue
                 }
             }
+        }
+    }
+}
+
+/// What a traversal step did to its environment's interval
+/// ([`book_step`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TraversalStep {
+    /// The interval is over: the traversal arrived on `g_n`, or it ended
+    /// after the horizon `c`.
+    pub interval_over: bool,
+    /// The traversal arrived on `g_n`.
+    pub reached: bool,
+    /// How the step went for `π_g`'s fine-tuning ([`Leg::Idle`] unless it
+    /// was steered).
+    pub leg: Leg,
+}
+
+/// Books a traversal step that led the agent to `cell` (`episode_ended`:
+/// the step ended the episode) for the traversal under way in `slot` and
+/// the Worker's `goal` of the interval (horizon `horizon`); `leg_before`:
+/// the leg a steered traversal was on before the step. Arriving pays `g_w`
+/// (the Worker does not take it again) and ends the traversal; so does
+/// stopping short.
+pub fn book_step(
+    slot: &mut Option<Traversal>,
+    goal: &mut WorkerGoal,
+    cell: u32,
+    episode_ended: bool,
+    horizon: u32,
+    leg_before: Option<usize>,
+) -> TraversalStep {
+    goal.moved_to(cell);
+    let t = slot.as_mut().expect("a traversal under way");
+    let progress = t.advance(cell, episode_ended);
+    let leg = match leg_before {
+        None => Leg::Idle,
+        Some(before) => match progress {
+            Progress::Continue if t.leg() > before => Leg::Reached,
+            Progress::Continue => Leg::Going,
+            Progress::Arrived => Leg::Reached,
+            Progress::Stopped => Leg::Ended,
+        },
+    };
+    let mut step = TraversalStep {
+        interval_over: false,
+        reached: false,
+        leg,
+    };
+    match progress {
+        Progress::Continue => {}
+        Progress::Arrived => {
+            *slot = None;
+            goal.wide_paid = true;
+            if cell == goal.narrow {
+                step.interval_over = true;
+                step.reached = true;
+            }
+            step.interval_over |= goal.steps >= horizon;
+        }
+        Progress::Stopped => {
+            *slot = None;
+            step.interval_over |= goal.steps >= horizon;
+        }
+    }
+    step
+}
+
+/// What `π_g` steers towards in each environment ([`steer_targets`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SteerTargets {
+    /// The waypoint of each environment's traversal (`NO_GOAL` where none
+    /// is steered).
+    pub goals: Vec<u32>,
+    /// Whether its core state starts afresh (a new edge begins).
+    pub fresh: Vec<bool>,
+}
+
+/// What `π_g` steers towards under the traversals under way, by
+/// environment.
+pub fn steer_targets(traversals: &[Option<&Traversal>]) -> SteerTargets {
+    let (goals, fresh) = traversals
+        .iter()
+        .map(|t| match t {
+            Some(t) => (t.waypoint().unwrap_or(NO_GOAL), t.leg_starts()),
+            None => (NO_GOAL, false),
+        })
+        .unzip();
+    SteerTargets { goals, fresh }
+}
+
+/// Runs the world graph traversals of a batch: the graph (with
+/// traversal), how routes are executed, `π_g` (which steers them in
+/// stochastic worlds) and its fine-tuning.
+#[derive(Debug)]
+pub(super) struct Traverser {
+    /// The graph traversal follows (`None`: no traversal).
+    graph: Option<WorldGraph>,
+    /// `π_g` of stage 1.
+    pi_g: Option<GoalConditionedPolicy>,
+    execution: Execution,
+    /// `π_g`'s fine-tuning while it steers traversals (training only).
+    steering: Option<Steering>,
+    /// Scratch buffer of the planner.
+    route: Route,
+}
+
+impl Traverser {
+    /// Traversals over `graph` (with `cfg.traversal`) for `task`, steered
+    /// by `pi_g` in MultiGoal-Stochastic (which needs it there) and
+    /// fine-tuned as `cfg` says, for `cfg.envs` environments on a
+    /// `width × height` grid.
+    pub(super) fn new(
+        cfg: &AgentConfig,
+        task: Task,
+        graph: Option<WorldGraph>,
+        pi_g: Option<GoalConditionedPolicy>,
+        width: usize,
+        height: usize,
+    ) -> Result<Traverser, LearnerError> {
+        let execution = if task == Task::MultiGoalStochastic {
+            Execution::Steer
+        } else {
+            Execution::Replay
+        };
+        if cfg.traversal && execution == Execution::Steer && pi_g.is_none() {
+            return Err(ConfigError::new(
+                "traversal",
+                "MultiGoal-Stochastic traversal is steered by π_g: give a discovery run",
+            )
+            .into());
+        }
+        let steering = match &pi_g {
+            Some(gcp) if cfg.traversal && execution == Execution::Steer && cfg.fine_tune_pi_g => {
+                Some(Steering::new(
+                    gcp,
+                    cfg.envs,
+                    width,
+                    height,
+                    cfg.goal_reward,
+                    cfg.step_penalty,
+                ))
+            }
+            _ => None,
+        };
+        Ok(Traverser {
+            graph: if cfg.traversal { graph } else { None },
+            pi_g,
+            execution,
+            steering,
+            route: Route::with_capacity(1024, 64),
+        })
+    }
+
+    /// The world graph traversal follows (`None`: no traversal).
+    pub(super) fn graph(&self) -> Option<&WorldGraph> {
+        self.graph.as_ref()
+    }
+
+    /// `π_g` of stage 1.
+    pub(super) fn pi_g(&self) -> Option<&GoalConditionedPolicy> {
+        self.pi_g.as_ref()
+    }
+
+    /// `π_g`'s weights while they are fine-tuned (a checkpoint's).
+    pub(super) fn fine_tuned(&self) -> Option<&nn::VarStore> {
+        self.pi_g
+            .as_ref()
+            .filter(|_| self.steering.is_some())
+            .map(GoalConditionedPolicy::var_store)
+    }
+
+    /// `π_g`'s fine-tuning, if on.
+    pub(super) fn steering(&self) -> Option<&Steering> {
+        self.steering.as_ref()
+    }
+
+    /// `π_g`'s fine-tuning, to restore a checkpoint.
+    pub(super) fn steering_mut(&mut self) -> Option<&mut Steering> {
+        self.steering.as_mut()
+    }
+
+    /// Starts a traversal for environment `e` of `obs` into `slot` if the
+    /// agent stands on a node with a route to its wide goal (of `goal`),
+    /// no traversal is under way and `g_w` is not paid for yet.
+    pub(super) fn try_start(
+        &mut self,
+        goal: &WorkerGoal,
+        slot: &mut Option<Traversal>,
+        obs: &ObsView<'_>,
+        e: usize,
+    ) -> bool {
+        let Some(graph) = &self.graph else {
+            return false;
+        };
+        if slot.is_some() || goal.wide_paid || goal.wide == NO_GOAL {
+            return false;
+        }
+        match Traversal::plan(graph, obs, e, goal.wide, self.execution, &mut self.route) {
+            Some(t) => {
+                *slot = Some(t);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Sets `actions` of the environments under `traversals`: the recorded
+    /// action (replay) or `π_g`'s step towards the next node (steer, from
+    /// `steer_state`, which it advances): sampled with `rng` and recorded
+    /// for its fine-tuning when `train` and fine-tuning is on, greedy
+    /// otherwise. Returns whether the step was recorded.
+    pub(super) fn actions(
+        &mut self,
+        traversals: &[Option<&Traversal>],
+        steer_state: &mut Option<LstmState>,
+        rng: &mut ReplayRng,
+        obs: &ObsView<'_>,
+        actions: &mut [u8],
+        train: bool,
+    ) -> Result<bool, LearnerError> {
+        let mut steer = false;
+        let mut recorded = false;
+        for (e, t) in traversals.iter().enumerate() {
+            if let Some(t) = t {
+                match t.execution() {
+                    Execution::Replay => {
+                        actions[e] = t
+                            .next_action()
+                            .expect("a traversal under way has an action")
+                    }
+                    Execution::Steer => steer = true,
+                }
+            }
+        }
+        if steer {
+            let gcp = self.pi_g.as_mut().expect("steered traversal has π_g");
+            let targets = steer_targets(traversals);
+            let state = steer_state
+                .as_ref()
+                .expect("steer state")
+                .reset_done(&mask(&targets.fresh));
+            let (chosen, next) = match self.steering.as_mut().filter(|_| train) {
+                Some(steering) => {
+                    let (logits, next) = steering.act(gcp, obs, &targets.goals, &state);
+                    let probs = tch::no_grad(|| logits.softmax(-1, tch::Kind::Float));
+                    recorded = true;
+                    (crate::seeding::sample_categorical(rng, &probs, false), next)
+                }
+                None => gcp.greedy_step(obs, &targets.goals, &state).map_err(|e| {
+                    LearnerError::Checkpoint {
+                        path: "π_g".into(),
+                        message: e.to_string(),
+                    }
+                })?,
+            };
+            *steer_state = Some(next);
+            for (e, t) in traversals.iter().enumerate() {
+                if t.is_some_and(|t| t.execution() == Execution::Steer) {
+                    // π_g was trained on the navigation actions.
+                    actions[e] = chosen[e].min(action::FORWARD);
+                }
+            }
+        }
+        Ok(recorded)
+    }
+
+    /// Books the outcome of a steered step (of [`Self::actions`]) for
+    /// `π_g`'s fine-tuning: `actions` where a leg was under way.
+    pub(super) fn book_steered(&mut self, actions: &[u8], legs: &[Leg]) {
+        if let Some(s) = self.steering.as_mut() {
+            let steer_actions: Vec<u8> = actions
+                .iter()
+                .zip(legs)
+                .map(|(&a, &l)| if l == Leg::Idle { 0 } else { a })
+                .collect();
+            s.book(&steer_actions, legs);
+        }
+    }
+
+    /// Starts `π_g`'s fine-tuning rollout of a training iteration from
+    /// `state`.
+    pub(super) fn start_fine_tuning(&mut self, state: Option<&LstmState>) {
+        if let (Some(s), Some(state)) = (self.steering.as_mut(), state) {
+            s.start(state);
+        }
+    }
+
+    /// `π_g`'s update after a training iteration, bootstrapped at `obs`
+    /// under `traversals` from `state`. (Environments not steering
+    /// bootstrap nothing: their last recorded step ended its goal
+    /// episode.)
+    pub(super) fn fine_tune(
+        &mut self,
+        obs: &ObsView<'_>,
+        traversals: &[Option<&Traversal>],
+        state: Option<&LstmState>,
+    ) {
+        if let (Some(s), Some(gcp), Some(state)) =
+            (self.steering.as_mut(), self.pi_g.as_ref(), state)
+        {
+            let targets = steer_targets(traversals);
+            s.update(
+                gcp,
+                obs,
+                &targets.goals,
+                &state.reset_done(&mask(&targets.fresh)),
+            );
         }
     }
 }

@@ -290,12 +290,36 @@ impl WideNarrowHead {
     /// `π^n(·|s_t, g_w, s_w)` of core outputs `h` `[N, hidden]`, the wide
     /// goals' indices in `V` `wide` `[N]` (int64) and local inputs `[N,
     /// window·WINDOW_CHANNELS]`, masked by `valid` `[N, window]`.
-    pub fn narrow(&self, h: &Tensor, wide: &Tensor, local: &Tensor, valid: &Tensor) -> Categorical {
+    /// `bias` `[N, window]`: the goal map's logits of the window cells, if
+    /// the map reaches `π^n` ([`Self::narrow_bias`]).
+    pub fn narrow(
+        &self,
+        h: &Tensor,
+        wide: &Tensor,
+        local: &Tensor,
+        valid: &Tensor,
+        bias: Option<&Tensor>,
+    ) -> Categorical {
         let which = wide.one_hot(self.candidates).to_kind(h.kind());
         let x = Tensor::cat(&[h, local, &which], 1)
             .apply(&self.narrow_hidden)
             .relu();
-        Categorical::new(&self.narrow_out.forward(&x), Some(valid))
+        let logits = self.narrow_out.forward(&x);
+        match bias {
+            Some(b) => Categorical::new(&(logits + b), Some(valid)),
+            None => Categorical::new(&logits, Some(valid)),
+        }
+    }
+
+    /// The goal map's logits of the windows of the taken wide goals `wide`
+    /// `[N]` (int64), from its logits at every candidate's window `windows`
+    /// `[N, |V|, window]`: `[N, window]`.
+    pub fn narrow_bias(windows: &Tensor, wide: &Tensor) -> Tensor {
+        let n = wide.size()[0];
+        let len = windows.size()[2];
+        windows
+            .gather(1, &wide.view([n, 1, 1]).expand([n, 1, len], false), false)
+            .squeeze_dim(1)
     }
 
     /// Window cells.
@@ -305,18 +329,22 @@ impl WideNarrowHead {
 
     /// `(log π^ω(g_w) + log π^n(g_n|g_w), H(π^ω) + H(π^n(·|g_w)))` `[N]`
     /// each, for taken wide indices `wide` and narrow slots `narrow`
-    /// (`[N]` int64).
+    /// (`[N]` int64); `bias` and `windows`: the goal map's logits of the
+    /// candidates and of their windows, if any.
+    #[allow(clippy::too_many_arguments)]
     pub fn terms(
         &self,
         h: &Tensor,
         bias: Option<&Tensor>,
+        windows: Option<&Tensor>,
         local: &Tensor,
         valid: &Tensor,
         wide: &Tensor,
         narrow: &Tensor,
     ) -> (Tensor, Tensor) {
         let pw = self.wide(h, bias);
-        let pn = self.narrow(h, wide, local, valid);
+        let narrow_bias = windows.map(|w| Self::narrow_bias(w, wide));
+        let pn = self.narrow(h, wide, local, valid, narrow_bias.as_ref());
         (
             pw.log_prob(wide) + pn.log_prob(narrow),
             (pw.entropy() + pn.entropy()).to_kind(Kind::Float),
@@ -470,7 +498,7 @@ mod tests {
         );
         let valid = Tensor::ones([2, 9], (Kind::Bool, Device::Cpu));
         let p = head
-            .narrow(&h, &Tensor::from_slice(&[0i64, 4]), &local, &valid)
+            .narrow(&h, &Tensor::from_slice(&[0i64, 4]), &local, &valid, None)
             .probs();
         let diff = (p.get(0) - p.get(1)).abs().max().double_value(&[]);
         assert!(diff > 1e-4, "π^n ignores g_w ({diff})");
@@ -506,7 +534,7 @@ mod tests {
             .view([1, -1])
             .expand([64, -1], false);
         let wide = Tensor::from_slice(&[2i64]).expand([64], false);
-        let pn = head.narrow(&h, &wide, &local, &mask);
+        let pn = head.narrow(&h, &wide, &local, &mask, None);
         let mut rng = <rand::rngs::SmallRng as rand::SeedableRng>::seed_from_u64(1);
         for _ in 0..20 {
             for k in crate::seeding::sample_index(&mut rng, &pn.probs()) {
@@ -543,6 +571,7 @@ mod tests {
         let valid = Tensor::from_slice(&[true, true, true, false]).view([1, 4]);
         let (logp, ent) = head.terms(
             &h,
+            None,
             None,
             &local,
             &valid,

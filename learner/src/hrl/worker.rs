@@ -16,8 +16,25 @@
 //! limit (truncation) is bootstrapped from its final state
 //! ([`WorkerStep::bootstrap`]). Handing over to a world-graph traversal
 //! towards `g_w` also ends the goal episode, by default paid as reaching
-//! `g_w` (the route brings the agent there; [`super::HandOver`]); the
-//! Worker resumes at `g_w` with a fresh goal episode for `g_n`.
+//! `g_w` (the route brings the agent there;
+//! [`HandOver`](super::config::HandOver)); the Worker resumes at `g_w` with
+//! a fresh goal episode for `g_n`.
+//!
+//! The Worker sees its goals as marks on goal planes of its input
+//! ([`goal_marks`]): the subgoal (FN), or `g_w` and `g_n` on planes of
+//! their own (WN). Inside the agent, `WorkerSide` owns its network, var
+//! store, optimiser and training rollout; the A2C baseline (section 4.1) is
+//! the same side without goal planes.
+
+use tch::nn;
+
+use super::config::{AgentConfig, AgentKind, WorkerTaskEnd};
+use crate::a2c::input::{CellInput, GoalMarks, NO_GOAL, goal_planes};
+use crate::a2c::net::{ActorCritic, ActorCriticConfig, ActorCriticOutput, LstmState};
+use crate::a2c::optim::Adam;
+use crate::a2c::rollout::{GradPath, Rollout, bootstrap_truncated, bootstrap_values};
+use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
+use crate::batch_env::ObsView;
 
 /// How the environment's episode stands after a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,26 +63,6 @@ impl EpisodeEnd {
     pub fn ended(self) -> bool {
         self != EpisodeEnd::Running
     }
-}
-
-/// How the Worker books a step on which the task ended the environment's
-/// episode (the exit, lava) before it reached `g_n`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum WorkerTaskEnd {
-    /// As the end of its goal episode with nothing more to earn. The
-    /// Worker is paid only for its goals, so it learns to keep off every
-    /// cell that ends the episode unless it is `g_n`: it walks around the
-    /// exit, and once the Manager has learnt to collect the balls without
-    /// naming the exit, no episode exits again and the Manager never
-    /// learns that the exit pays.
-    Terminal,
-    /// As a cut, like the step limit's: bootstrapped from the Worker's
-    /// value of the final state. The episode's end is the Manager's
-    /// affair (its reward, its termination); to the Worker the exit is a
-    /// cell like any other, neither a goal nor a trap.
-    #[default]
-    Cut,
 }
 
 /// The Worker's goals in one environment's current interval.
@@ -170,6 +167,154 @@ impl WorkerGoal {
             self.wide_paid = true;
         }
         step.done = true;
+    }
+}
+
+/// The Worker's goal marks of `goals`, [`AgentConfig::goal_planes`] per
+/// environment: the subgoal (FN), or `g_w` and `g_n` on planes of their own
+/// (WN), `g_w` only until it is paid (the Worker is rewarded for it once
+/// per interval); none for the baseline.
+pub fn goal_marks<'a>(kind: AgentKind, goals: impl Iterator<Item = &'a WorkerGoal>) -> Vec<u32> {
+    match kind {
+        AgentKind::WideNarrow => goals
+            .flat_map(|g| [if g.wide_paid { NO_GOAL } else { g.wide }, g.narrow])
+            .collect(),
+        AgentKind::Feudal => goals.map(|g| g.narrow).collect(),
+        AgentKind::A2c => Vec::new(),
+    }
+}
+
+/// The Worker's side of an agent (the baseline's, for A2C): its
+/// goal-conditioned network, var store and optimiser, and the rollout it
+/// learns from.
+#[derive(Debug)]
+pub(super) struct WorkerSide {
+    kind: AgentKind,
+    /// Goal planes of the input ([`AgentConfig::goal_planes`]).
+    planes: usize,
+    width: usize,
+    height: usize,
+    pub(super) vs: nn::VarStore,
+    pub(super) net: ActorCritic,
+    pub(super) opt: Adam,
+    pub(super) rollout: Rollout,
+}
+
+impl WorkerSide {
+    /// A fresh Worker of `cfg` acting on a `width × height` grid with
+    /// `num_actions` actions (its weights are drawn from libtorch's
+    /// generator: build it under [`crate::seeding::init_seeded`]).
+    pub(super) fn new(
+        cfg: &AgentConfig,
+        width: usize,
+        height: usize,
+        num_actions: usize,
+    ) -> WorkerSide {
+        let net_cfg = ActorCriticConfig {
+            conv_channels: cfg.conv_channels,
+            hidden: cfg.hidden,
+            num_actions: num_actions as i64,
+            goal_planes: cfg.goal_planes(),
+        };
+        let vs = nn::VarStore::new(tch::Device::Cpu);
+        let net = ActorCritic::new(&vs.root(), &net_cfg, width, height);
+        let opt = Adam::new(&[("worker", &vs)], cfg.worker.learning_rate);
+        WorkerSide {
+            kind: cfg.kind,
+            planes: cfg.goal_planes(),
+            width,
+            height,
+            vs,
+            net,
+            opt,
+            rollout: Rollout::new(
+                GradPath::default(),
+                cfg.envs,
+                width,
+                height,
+                cfg.goal_planes(),
+            ),
+        }
+    }
+
+    /// Rebuilds the (empty) rollout of `envs` environments with gradient
+    /// path `path`.
+    pub(super) fn set_grad_path(&mut self, path: GradPath, envs: usize) {
+        self.rollout = Rollout::new(path, envs, self.width, self.height, self.planes);
+    }
+
+    /// The goal marks of `goals` ([`goal_marks`]).
+    pub(super) fn goal_marks<'a>(&self, goals: impl Iterator<Item = &'a WorkerGoal>) -> Vec<u32> {
+        goal_marks(self.kind, goals)
+    }
+
+    /// `cells` (of [`Self::goal_marks`]) as the goal planes of the input
+    /// (none for the baseline).
+    pub(super) fn marks<'a>(&self, cells: &'a [u32]) -> Option<GoalMarks<'a>> {
+        (self.planes > 0).then_some(GoalMarks {
+            cells,
+            per_env: self.planes,
+        })
+    }
+
+    /// One step of the network on `obs` towards the goals `marks` (of
+    /// [`Self::goal_marks`]) from `state`: recorded in the rollout when
+    /// `train`, else without gradient.
+    pub(super) fn act(
+        &mut self,
+        obs: &ObsView<'_>,
+        marks: &[u32],
+        state: &LstmState,
+        train: bool,
+    ) -> ActorCriticOutput {
+        if train {
+            self.rollout.act(&self.net, obs, self.marks(marks), state)
+        } else {
+            let input = self.input(obs, marks);
+            tch::no_grad(|| self.net.step(&input, state))
+        }
+    }
+
+    /// The network's input of `obs` with the goals `marks` (of
+    /// [`Self::goal_marks`]) on its goal planes.
+    pub(super) fn input(&self, obs: &ObsView<'_>, marks: &[u32]) -> CellInput {
+        let goals = self.marks(marks);
+        let mut input = CellInput::new(self.width, self.height, goal_planes(goals));
+        input.push_obs(obs, goals);
+        input
+    }
+
+    /// Adds `γ · V(s_final)` to the `rewards` of the environments `cut`,
+    /// whose goal episodes the step limit cut (truncation is not
+    /// termination), from their final states towards the goals `marks`.
+    pub(super) fn bootstrap_truncated(
+        &self,
+        rewards: &mut [f32],
+        obs: &ObsView<'_>,
+        marks: &[u32],
+        state: &LstmState,
+        cut: &[usize],
+        gamma: f64,
+    ) {
+        let goals = self.marks(marks);
+        bootstrap_truncated(rewards, &self.net, obs, goals, state, cut, gamma);
+    }
+
+    /// The rollout's bootstrap values `V(s_T)` at `obs` towards `marks`.
+    pub(super) fn bootstrap(&mut self, obs: &ObsView<'_>, marks: &[u32], state: &LstmState) {
+        let goals = self.marks(marks);
+        self.rollout.bootstrap = bootstrap_values(&self.net, obs, goals, state);
+    }
+
+    /// The A2C update on the rollout (`cfg`: the Worker's settings); the
+    /// time it took goes to `times`.
+    pub(super) fn update(&mut self, cfg: &A2cConfig, times: &mut PhaseTimes) -> LossFigures {
+        let t0 = std::time::Instant::now();
+        let (loss, figures) = self.rollout.loss(&self.net, cfg);
+        let t1 = PhaseTimes::lap(&mut times.loss, t0);
+        self.opt.backward_step(&loss, cfg.grad_clip_norm);
+        PhaseTimes::lap(&mut times.backward, t1);
+        figures
     }
 }
 

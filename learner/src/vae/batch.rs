@@ -3,8 +3,8 @@
 //!
 //! Trajectory `b` has `len_b = T_b + 1` states and `T_b` actions. Every
 //! tensor is `[L, B]` with `L = max_b len_b`; the action slot of the last
-//! state (and of padding) holds [`NO_ACTION`]-free padding value 0 and is
-//! masked out of every loss.
+//! state (and of padding) holds the padding value 0 and is masked out of
+//! every loss.
 
 use tch::{Device, Tensor};
 

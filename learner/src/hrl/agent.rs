@@ -1,0 +1,356 @@
+//! A stage 2 agent (Shang et al. 2019, section 4): its owners, how it is
+//! built, and its checkpoints.
+//!
+//! [`HrlAgent`] holds the Worker's side ([`WorkerSide`]: the baseline's
+//! network for A2C), the Manager's side for FN and WN ([`ManagerSide`],
+//! sections 4.1–4.2), the world graph traversal with `π_g`
+//! ([`Traverser`], section 4.3) and the training controller
+//! ([`Controller`]). Building it initialises the weights from the seed,
+//! then copies `π_g`'s where configured (section 4.4; [`init`]). Running it
+//! — a batch step, training iterations, evaluation — is in
+//! [`super::run`].
+
+use std::path::Path;
+
+use planner::WorldGraph;
+use sim::{Layout, Task, action};
+use tch::{Tensor, nn};
+
+use super::config::{AgentConfig, AgentKind, WorldGraphInputs};
+use super::controller::{Controller, SavedController};
+use super::init;
+use super::manager::ManagerSide;
+use super::traversal::Traverser;
+use super::wide_narrow;
+use super::worker::WorkerSide;
+use crate::a2c::PhaseTimes;
+use crate::a2c::rollout::GradPath;
+use crate::batch_env::BatchEnvironment;
+use crate::error::{ConfigError, LearnerError};
+
+/// A stage 2 agent (module docs).
+pub struct HrlAgent {
+    pub(super) cfg: AgentConfig,
+    pub(super) task: Task,
+    pub(super) width: usize,
+    /// The Manager horizon `c`.
+    pub(super) horizon: u32,
+    /// The Worker (the baseline for A2C).
+    pub(super) worker: WorkerSide,
+    /// The Manager (FN, WN).
+    pub(super) manager: Option<ManagerSide>,
+    /// World graph traversal and `π_g`.
+    pub(super) traverser: Traverser,
+    /// The training controller.
+    pub(super) ctl: Controller,
+    pub(super) seed: u64,
+    pub(super) times: PhaseTimes,
+    init_report: Option<init::InitReport>,
+}
+
+impl std::fmt::Debug for HrlAgent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HrlAgent")
+            .field("cfg", &self.cfg)
+            .field("task", &self.task)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Salts of the agent's seeds.
+const SEGMENT_SALT: u64 = 0x5E6_0000;
+pub(super) const EVAL_SALT: u64 = 0xE7A1_0000;
+
+impl HrlAgent {
+    /// A fresh agent for `task` on `layout`, weights initialised from
+    /// `seed` (then copied from `π_g` where configured).
+    pub fn new(
+        cfg: &AgentConfig,
+        layout: &Layout,
+        task: Task,
+        inputs: Option<WorldGraphInputs>,
+        seed: u64,
+    ) -> Result<HrlAgent, LearnerError> {
+        cfg.validate()?;
+        let (width, height) = (layout.width, layout.height);
+        let inputs = inputs.unwrap_or(WorldGraphInputs {
+            graph: None,
+            gcp: None,
+        });
+        if cfg.needs_graph() && inputs.graph.is_none() {
+            return Err(ConfigError::new(
+                "candidates",
+                "WN over V_rand or V_p needs a world graph",
+            )
+            .into());
+        }
+        if cfg.init_from_gcp && inputs.gcp.is_none() {
+            return Err(ConfigError::new("init_from_gcp", "needs π_g from a discovery run").into());
+        }
+        let hierarchical = cfg.kind != AgentKind::A2c;
+        let (worker, manager) = crate::seeding::init_seeded(seed, || {
+            let worker = WorkerSide::new(cfg, width, height, task.num_actions());
+            let manager =
+                hierarchical.then(|| ManagerSide::new(cfg, layout, inputs.graph.as_ref()));
+            (worker, manager)
+        });
+        let init_report = match &inputs.gcp {
+            Some(gcp) if cfg.init_from_gcp => Some(init::from_pi_g(
+                gcp,
+                cfg,
+                &worker.vs,
+                manager.as_ref().map(|m| &m.vs),
+            )?),
+            _ => None,
+        };
+        let traverser = Traverser::new(cfg, task, inputs.graph, inputs.gcp, width, height)?;
+        let ctl = Controller::new(
+            cfg.envs,
+            seed,
+            &worker.net,
+            manager.as_ref().map(|m| &m.net),
+            traverser.pi_g(),
+        );
+        Ok(HrlAgent {
+            cfg: cfg.clone(),
+            task,
+            width,
+            horizon: cfg.horizon(),
+            worker,
+            manager,
+            traverser,
+            ctl,
+            seed,
+            times: PhaseTimes::default(),
+            init_report,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &AgentConfig {
+        &self.cfg
+    }
+
+    /// What `π_g` initialisation copied.
+    pub fn init_report(&self) -> Option<&init::InitReport> {
+        self.init_report.as_ref()
+    }
+
+    /// The wide-goal candidates `V` (WN).
+    pub fn candidates(&self) -> &[u32] {
+        self.manager.as_ref().map_or(&[], |m| &m.candidates)
+    }
+
+    /// Which free cells can be narrow goals: the coverage of the windows
+    /// around `V` (WN).
+    pub fn window_coverage(&self) -> Option<wide_narrow::Coverage> {
+        let m = self.manager.as_ref()?;
+        m.window.as_ref().map(|w| w.coverage(&m.candidates))
+    }
+
+    /// The world graph traversal follows.
+    pub fn graph(&self) -> Option<&WorldGraph> {
+        self.traverser.graph()
+    }
+
+    /// Chooses the gradient path of the Worker's (or baseline's) update
+    /// (the benchmark's plain path is [`GradPath::PerStep`]).
+    pub fn set_grad_path(&mut self, path: GradPath) {
+        self.worker.set_grad_path(path, self.cfg.envs);
+    }
+
+    /// A controller of `n` environments at the start of their episodes,
+    /// its action RNG seeded by `seed`.
+    pub(super) fn controller(&self, n: usize, seed: u64) -> Controller {
+        Controller::new(
+            n,
+            seed,
+            &self.worker.net,
+            self.manager.as_ref().map(|m| &m.net),
+            self.traverser.pi_g(),
+        )
+    }
+
+    /// The training controller — core states, goals, traversals, the
+    /// Manager's decision queues and the action RNG — as a record (JSON)
+    /// and a tensor file. Saved with a checkpoint beside the environments'
+    /// states, it lets a run resume mid-episode exactly where it stopped,
+    /// so that neither validation nor a crash perturbs training.
+    pub fn save_controller(&self) -> Result<SavedController, LearnerError> {
+        self.ctl.save()
+    }
+
+    /// Restores [`Self::save_controller`]'s record and tensors (of an agent
+    /// of the same configuration and batch); `source` names them in errors.
+    pub fn load_controller(
+        &mut self,
+        json: &[u8],
+        tensors: &[u8],
+        source: &Path,
+    ) -> Result<(), LearnerError> {
+        self.ctl.restore(json, tensors, source, self.cfg.envs)
+    }
+
+    /// Starts training segment `segment`: every environment starts a new
+    /// episode, and the core states, goals and the action RNG start afresh
+    /// from `(seed, segment)`. A run calls it once, at its start (segment
+    /// 0); between segments training goes on where it was (validation uses
+    /// environments and a controller of its own), and a resumed run
+    /// restores its controller ([`Self::load_controller`]) — where the
+    /// environments' states cannot be restored (another process owns them),
+    /// it starts the segment afresh instead.
+    pub fn start_segment(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+        segment: u64,
+    ) -> Result<(), LearnerError> {
+        let n = self.check_batch(env)?;
+        env.step(&vec![action::RESET; n])?;
+        self.ctl = self.controller(n, sim::env_seed(self.seed ^ SEGMENT_SALT, segment));
+        Ok(())
+    }
+
+    /// The batch's size, which must be the one the agent trains on.
+    pub(super) fn check_batch(&self, env: &dyn BatchEnvironment) -> Result<usize, LearnerError> {
+        let n = env.num_envs();
+        if n != self.cfg.envs {
+            return Err(ConfigError::new(
+                "envs",
+                format!(
+                    "the agent was built for {} environments, the batch has {n}",
+                    self.cfg.envs
+                ),
+            )
+            .into());
+        }
+        Ok(n)
+    }
+
+    /// Where training time went since the last call.
+    pub fn take_times(&mut self) -> PhaseTimes {
+        let mut t = std::mem::take(&mut self.times);
+        t.add(&std::mem::take(&mut self.worker.rollout.times));
+        t
+    }
+
+    /// Model FLOPs per env-step of the Worker's (baseline's) update path,
+    /// plus the Manager's forward and backward once per decision (about one
+    /// per `c / 2` steps).
+    pub fn flops_per_env_step(&self, path: GradPath) -> f64 {
+        let worker = crate::a2c::net::flops_per_env_step(
+            self.worker.net.trunk(),
+            self.task.num_actions() as i64,
+            path,
+        );
+        match &self.manager {
+            Some(m) => worker + m.flops_per_decision() / (self.horizon as f64 / 2.0).max(1.0),
+            None => worker,
+        }
+    }
+
+    /// Every tensor of the agent's state: the networks' weights and the
+    /// optimisers' moments (`worker/...`, `manager/...`, `adam-worker/...`).
+    fn named_tensors(&self) -> Vec<(String, Tensor)> {
+        let mut out: Vec<(String, Tensor)> = Vec::new();
+        let mut add = |prefix: &str, vs: &nn::VarStore| {
+            let mut v: Vec<(String, Tensor)> = vs
+                .variables()
+                .into_iter()
+                .map(|(k, t)| (format!("{prefix}/{k}"), t))
+                .collect();
+            v.sort_by(|a, b| a.0.cmp(&b.0));
+            out.extend(v);
+        };
+        add("worker", &self.worker.vs);
+        if let Some(m) = &self.manager {
+            add("manager", &m.vs);
+        }
+        if let Some(vs) = self.traverser.fine_tuned() {
+            add("pi_g", vs);
+        }
+        out.extend(
+            self.worker
+                .opt
+                .state()
+                .into_iter()
+                .map(|(k, t)| (format!("worker-{k}"), t)),
+        );
+        if let Some(m) = &self.manager {
+            out.extend(
+                m.opt
+                    .state()
+                    .into_iter()
+                    .map(|(k, t)| (format!("manager-{k}"), t)),
+            );
+        }
+        if let Some(s) = self.traverser.steering() {
+            out.extend(
+                s.optimiser()
+                    .state()
+                    .into_iter()
+                    .map(|(k, t)| (format!("pi_g-{k}"), t)),
+            );
+        }
+        out
+    }
+
+    /// The weights and optimiser moments as bytes (a checkpoint's tensor
+    /// file).
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LearnerError> {
+        let named = self.named_tensors();
+        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), t)).collect();
+        let mut buf = Vec::new();
+        Tensor::save_multi_to_stream(&refs, &mut buf)?;
+        Ok(buf)
+    }
+
+    /// Restores [`Self::to_bytes`] (of an agent of the same configuration);
+    /// `source` names the input in errors.
+    pub fn load_bytes(&mut self, bytes: &[u8], source: &Path) -> Result<(), LearnerError> {
+        let bad = |message: String| LearnerError::Checkpoint {
+            path: source.display().to_string(),
+            message,
+        };
+        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(bytes))
+            .map_err(|e| bad(e.to_string()))?;
+        let find = |k: &str| loaded.iter().find(|(n, _)| n == k).map(|(_, t)| t);
+        tch::no_grad(|| -> Result<(), LearnerError> {
+            let fine_tuned = self.traverser.fine_tuned().map(|vs| ("pi_g", vs));
+            for (prefix, vs) in std::iter::once(("worker", &self.worker.vs))
+                .chain(self.manager.as_ref().map(|m| ("manager", &m.vs)))
+                .chain(fine_tuned)
+            {
+                for (k, mut t) in vs.variables() {
+                    let key = format!("{prefix}/{k}");
+                    let src = find(&key).ok_or_else(|| bad(format!("no tensor {key}")))?;
+                    if src.size() != t.size() {
+                        return Err(bad(format!(
+                            "{key} has shape {:?}, expected {:?}",
+                            src.size(),
+                            t.size()
+                        )));
+                    }
+                    t.copy_(src);
+                }
+            }
+            Ok(())
+        })?;
+        let strip = |prefix: &str| -> Vec<(String, Tensor)> {
+            loaded
+                .iter()
+                .filter_map(|(k, t)| {
+                    k.strip_prefix(prefix)
+                        .map(|s| (s.to_string(), t.shallow_clone()))
+                })
+                .collect()
+        };
+        self.worker.opt.load_state(&strip("worker-")).map_err(bad)?;
+        if let Some(m) = self.manager.as_mut() {
+            m.opt.load_state(&strip("manager-")).map_err(bad)?;
+        }
+        if let Some(s) = self.traverser.steering_mut() {
+            s.optimiser_mut().load_state(&strip("pi_g-")).map_err(bad)?;
+        }
+        Ok(())
+    }
+}

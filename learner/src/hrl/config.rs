@@ -1,0 +1,298 @@
+//! The settings of a stage 2 agent (Shang et al. 2019, section 4) and what
+//! it takes from stage 1.
+//!
+//! - [`AgentConfig`]: which agent — the A2C baseline, the Feudal Network
+//!   (section 4.1) or the Wide-then-Narrow Manager (section 4.2) over a
+//!   candidate set `V` ([`Candidates`]) — with or without world graph
+//!   traversal (section 4.3) and initialisation from `π_g` (section 4.4),
+//!   and its sizes, horizon, window and rewards;
+//! - [`HandOver`] and [`WorkerTaskEnd`]: how the Worker's reward books a
+//!   hand-over to a traversal and a step on which the task ended the
+//!   episode (see [`super::worker`]);
+//! - [`WorldGraphInputs`]: the world graph and `π_g` of stage 1.
+
+use planner::WorldGraph;
+use serde::{Deserialize, Serialize};
+use sim::{Layout, Task};
+
+use crate::a2c::A2cConfig;
+use crate::error::{ConfigError, LearnerError};
+use crate::gcp::GoalConditionedPolicy;
+
+/// Which agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AgentKind {
+    /// The A2C-LSTM baseline.
+    A2c,
+    /// The Feudal Network: Manager over every valid cell, Worker.
+    #[serde(alias = "fn")]
+    Feudal,
+    /// Wide-then-Narrow Manager, Worker.
+    #[serde(alias = "wn")]
+    WideNarrow,
+}
+
+/// The candidate set `V` of wide goals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Candidates {
+    /// `V_all`: every valid cell.
+    All,
+    /// `V_rand`: random cells, as many as `V_p`.
+    Random,
+    /// `V_p`: the pivotal states of a discovery run.
+    Pivotal,
+}
+
+/// What handing over to a world-graph traversal pays the Worker (section
+/// 4.3 leaves it open: the traversal starts on "a pivotal state with a
+/// route to `g_w`", wherever the Worker met it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HandOver {
+    /// Paid as reaching `g_w`: the route brings the agent there, so
+    /// reaching any node with a route to `g_w` is as good as reaching it.
+    #[default]
+    PaysWideGoal,
+    /// Not paid: the Worker's goal episode ends on the step penalty alone,
+    /// so the Worker is paid only for cells it walks onto itself.
+    Unpaid,
+}
+
+/// Settings of a stage 2 agent. Sizes default to `π_g`'s (the paper
+/// "inherit\[s\] most hyperparameters from the training of `π_g`"; the
+/// Manager and the Worker "share similar model architecture").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AgentConfig {
+    /// The agent.
+    pub kind: AgentKind,
+    /// Wide-goal candidates (WN).
+    pub candidates: Candidates,
+    /// World graph traversal (WN over `V_rand` or `V_p`).
+    pub traversal: bool,
+    /// Initialise the Manager's and the Worker's encoders (and the Worker's
+    /// core and heads) from `π_g`.
+    pub init_from_gcp: bool,
+    /// Environments per update (the paper: 32 agents).
+    pub envs: usize,
+    /// Rollout length `T` per update.
+    pub rollout_len: usize,
+    /// Manager horizon `c` in Worker steps; 0: a third of the rollout (the
+    /// paper's choice).
+    pub horizon: usize,
+    /// Side `N` of the narrow window; 0: auto, the paper's 5 on grids up to
+    /// 25 cells wide and 7 beyond (5×5 small and medium, 7×7 large), widened
+    /// to the smallest odd side whose windows around the wide-goal
+    /// candidates cover every free cell
+    /// ([`super::wide_narrow::covering_side`]). A non-zero side is used as
+    /// given.
+    pub window: usize,
+    /// Output channels of the encoder's convolutions.
+    pub conv_channels: [i64; 2],
+    /// Width of the encoder output and the LSTM core.
+    pub hidden: i64,
+    /// The Worker's (and the baseline's) A2C.
+    pub worker: A2cConfig,
+    /// The Manager's A2C (`γ` per environment step; an interval of `k`
+    /// steps is discounted by `γ^k`).
+    pub manager: A2cConfig,
+    /// The Worker's reward for reaching a goal.
+    pub goal_reward: f32,
+    /// The Worker's reward per step.
+    pub step_penalty: f32,
+    /// Fine-tune `π_g` on the traversal steps it steers (MultiGoal-
+    /// Stochastic with traversal; [`super::steering`]).
+    pub fine_tune_pi_g: bool,
+    /// What a hand-over to a traversal pays the Worker.
+    pub hand_over: HandOver,
+    /// The Manager's goal map ([`super::feudal::GoalMap`]): a fully
+    /// convolutional logit per cell added to its goal head's (FN, WN).
+    pub goal_map: bool,
+    /// WN: the goal map reaches `π^n` over the window of `g_w`, and `π^ω`
+    /// through the log-sum-exp of the map over each candidate's window
+    /// ([`super::feudal::GoalMap::with_windows`]); off, `π^ω` reads the map
+    /// at the candidates' own cells only (the behaviour until `a1555f3`).
+    pub goal_map_windows: bool,
+    /// How the Worker books a step on which the task ended the episode
+    /// before it reached `g_n` ([`WorkerTaskEnd`]).
+    pub worker_task_end: WorkerTaskEnd,
+}
+
+impl Default for AgentConfig {
+    fn default() -> Self {
+        AgentConfig {
+            kind: AgentKind::WideNarrow,
+            candidates: Candidates::Pivotal,
+            traversal: false,
+            init_from_gcp: false,
+            envs: 32,
+            rollout_len: 60,
+            horizon: 0,
+            window: 0,
+            conv_channels: [16, 32],
+            hidden: 128,
+            worker: A2cConfig::default(),
+            manager: A2cConfig::default(),
+            goal_reward: 1.0,
+            step_penalty: -0.01,
+            fine_tune_pi_g: true,
+            hand_over: HandOver::default(),
+            goal_map: true,
+            goal_map_windows: true,
+            worker_task_end: WorkerTaskEnd::default(),
+        }
+    }
+}
+
+impl AgentConfig {
+    /// Checks every value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.envs == 0 {
+            return Err(ConfigError::new("envs", "must be at least 1"));
+        }
+        if self.rollout_len == 0 {
+            return Err(ConfigError::new("rollout_len", "must be at least 1"));
+        }
+        if self.window != 0 && self.window.is_multiple_of(2) {
+            return Err(ConfigError::new(
+                "window",
+                format!("{} must be odd", self.window),
+            ));
+        }
+        if self.conv_channels.iter().any(|&c| c < 1) || self.hidden < 1 {
+            return Err(ConfigError::new("hidden", "network sizes must be ≥ 1"));
+        }
+        if !self.goal_reward.is_finite() || !self.step_penalty.is_finite() {
+            return Err(ConfigError::new("goal_reward", "rewards must be finite"));
+        }
+        self.worker.validate("worker")?;
+        self.manager.validate("manager")?;
+        if self.traversal
+            && !(self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All)
+        {
+            return Err(ConfigError::new(
+                "traversal",
+                "needs the Wide-then-Narrow agent over V_rand or V_p (the graph of V_all is trivial)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The Manager horizon `c`.
+    pub fn horizon(&self) -> u32 {
+        if self.horizon == 0 {
+            (self.rollout_len / 3).max(1) as u32
+        } else {
+            self.horizon as u32
+        }
+    }
+
+    /// The narrow window's side for a grid `width` cells wide.
+    pub fn window_side(&self, width: usize) -> usize {
+        match self.window {
+            0 if width > 25 => 7,
+            0 => 5,
+            n => n,
+        }
+    }
+
+    /// Goal planes of the Worker's input: none for the baseline, the
+    /// subgoal for FN, `g_w` and `g_n` on planes of their own for WN.
+    pub fn goal_planes(&self) -> usize {
+        match self.kind {
+            AgentKind::A2c => 0,
+            AgentKind::Feudal => 1,
+            AgentKind::WideNarrow => 2,
+        }
+    }
+
+    /// Whether the agent needs a world graph (WN over `V_rand` or `V_p`).
+    pub fn needs_graph(&self) -> bool {
+        self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All
+    }
+
+    /// A short name: `a2c`, `fn`, `fn-init`, `wn-pivotal-trav-init`, ...
+    pub fn name(&self) -> String {
+        let mut s = match self.kind {
+            AgentKind::A2c => "a2c".to_string(),
+            AgentKind::Feudal => "fn".to_string(),
+            AgentKind::WideNarrow => format!(
+                "wn-{}",
+                match self.candidates {
+                    Candidates::All => "all",
+                    Candidates::Random => "random",
+                    Candidates::Pivotal => "pivotal",
+                }
+            ),
+        };
+        if self.traversal {
+            s.push_str("-trav");
+        }
+        if self.init_from_gcp {
+            s.push_str("-init");
+        }
+        s
+    }
+}
+
+/// What a stage 2 agent takes from stage 1: the world graph over the
+/// candidate set (for WN over `V_rand` or `V_p`) and `π_g` (for
+/// initialisation and steered traversal).
+pub struct WorldGraphInputs {
+    /// The graph whose nodes are `V` (`None` for `V_all`).
+    pub graph: Option<WorldGraph>,
+    /// `π_g` as discovery left it.
+    pub gcp: Option<GoalConditionedPolicy>,
+}
+
+impl std::fmt::Debug for WorldGraphInputs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WorldGraphInputs")
+            .field("nodes", &self.graph.as_ref().map(|g| g.num_nodes()))
+            .field("gcp", &self.gcp.is_some())
+            .finish()
+    }
+}
+
+impl WorldGraphInputs {
+    /// A graph over 24 random cells of `layout` and no `π_g` (for the
+    /// learner benchmark, which needs no discovery run).
+    pub fn random_for_bench(
+        layout: &Layout,
+        task: Task,
+        seed: u64,
+    ) -> Result<WorldGraphInputs, LearnerError> {
+        let cfg = planner::PlannerConfig {
+            candidates: planner::CandidateSet::Random { k: 24 },
+            seed,
+            task,
+            ..planner::PlannerConfig::default()
+        };
+        Ok(WorldGraphInputs {
+            graph: Some(WorldGraph::build(layout, &cfg, &[])?),
+            gcp: None,
+        })
+    }
+}
+
+/// How the Worker books a step on which the task ended the environment's
+/// episode (the exit, lava) before it reached `g_n`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WorkerTaskEnd {
+    /// As the end of its goal episode with nothing more to earn. The
+    /// Worker is paid only for its goals, so it learns to keep off every
+    /// cell that ends the episode unless it is `g_n`: it walks around the
+    /// exit, and once the Manager has learnt to collect the balls without
+    /// naming the exit, no episode exits again and the Manager never
+    /// learns that the exit pays.
+    Terminal,
+    /// As a cut, like the step limit's: bootstrapped from the Worker's
+    /// value of the final state. The episode's end is the Manager's
+    /// affair (its reward, its termination); to the Worker the exit is a
+    /// cell like any other, neither a goal nor a trap.
+    #[default]
+    Cut,
+}

@@ -1,0 +1,260 @@
+//! The controller: what the hierarchy carries from one step of the batch
+//! to the next (Shang et al. 2019, sections 4.1–4.3).
+//!
+//! The Manager and the Worker act on time scales of their own (section
+//! 4.1): per environment the controller holds the Worker's goals of the
+//! current interval (`g_w`, `g_n`; [`WorkerGoal`]), whether the Manager
+//! has to decide before the next step, the world graph traversal under way
+//! (section 4.3; [`Traversal`]) and, while training, the Manager's
+//! decisions not trained yet ([`DecisionQueue`]). Beside them: the core
+//! states of the Worker, the Manager and `π_g` (steering traversals), and
+//! the action RNG.
+//!
+//! Training keeps one controller across its iterations and validations; a
+//! checkpoint saves it ([`Controller::save`]) beside the environments'
+//! states, so a resumed run goes on mid-episode exactly where it stopped.
+//! Evaluation runs on a controller of its own.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use sim::{ReplayRng, RngState};
+use tch::Tensor;
+
+use super::feudal::{DecisionQueue, Manager};
+use super::traversal::Traversal;
+use super::worker::WorkerGoal;
+use crate::a2c::input::NO_GOAL;
+use crate::a2c::net::{ActorCritic, LstmState};
+use crate::error::LearnerError;
+use crate::gcp::GoalConditionedPolicy;
+
+/// One environment's hierarchical state.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(super) struct EnvCtl {
+    /// The Manager decides a new goal before the next step (the episode
+    /// started or the interval ended).
+    pub(super) need_decision: bool,
+    /// Reset the Manager's core before its next decision.
+    pub(super) manager_reset: bool,
+    /// The Worker's goals of the current interval.
+    pub(super) goal: WorkerGoal,
+    /// The world graph traversal under way.
+    pub(super) traversal: Option<Traversal>,
+}
+
+impl EnvCtl {
+    /// An environment at the start of an episode: no goal, a decision due.
+    fn fresh() -> EnvCtl {
+        EnvCtl {
+            need_decision: true,
+            manager_reset: true,
+            goal: WorkerGoal::new(NO_GOAL, NO_GOAL, NO_GOAL),
+            traversal: None,
+        }
+    }
+}
+
+/// The per-batch state of an agent: core states, goals, traversals, the
+/// action RNG, and (training) the Manager's decision queues.
+#[derive(Debug)]
+pub(super) struct Controller {
+    /// The Worker's (the baseline's) core state.
+    pub(super) worker_state: LstmState,
+    /// The Manager's core state (FN, WN).
+    pub(super) manager_state: Option<LstmState>,
+    /// `π_g`'s core state while it steers traversals (with `π_g`).
+    pub(super) steer_state: Option<LstmState>,
+    /// Each environment's goals and traversal.
+    pub(super) envs: Vec<EnvCtl>,
+    /// Each environment's Manager decisions not trained yet.
+    pub(super) queues: Vec<DecisionQueue>,
+    /// The Manager's core state before the first decision of each queue.
+    pub(super) manager_init: Option<LstmState>,
+    /// Draws the Worker's, the Manager's and `π_g`'s actions.
+    pub(super) rng: ReplayRng,
+}
+
+/// What of a [`Controller`] is not a tensor, as saved with a training
+/// checkpoint ([`Controller::save`]).
+#[derive(Debug, Serialize, Deserialize)]
+struct ControllerRecord {
+    envs: Vec<EnvCtl>,
+    queues: Vec<DecisionQueue>,
+    rng: RngState,
+}
+
+/// A training controller as a checkpoint saves it
+/// (`HrlAgent::save_controller`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SavedController {
+    /// Goals, traversals, the Manager's decision queues and the action
+    /// RNG's state (JSON).
+    pub record: Vec<u8>,
+    /// The core states of the Worker, the Manager and `π_g` (a tensor
+    /// file).
+    pub tensors: Vec<u8>,
+}
+
+impl Controller {
+    /// A controller of `n` environments at the start of their episodes:
+    /// zero core states of `worker`, `manager` and `pi_g`, every
+    /// environment waiting for a decision, the action RNG seeded by `seed`.
+    pub(super) fn new(
+        n: usize,
+        seed: u64,
+        worker: &ActorCritic,
+        manager: Option<&Manager>,
+        pi_g: Option<&GoalConditionedPolicy>,
+    ) -> Controller {
+        Controller {
+            worker_state: worker.zero_state(n as i64),
+            manager_state: manager.map(|m| m.zero_state(n as i64)),
+            steer_state: pi_g.map(|g| g.network().zero_state(n as i64)),
+            envs: vec![EnvCtl::fresh(); n],
+            queues: (0..n)
+                .map(|_| DecisionQueue {
+                    decisions: Vec::new(),
+                })
+                .collect(),
+            manager_init: manager.map(|m| m.zero_state(n as i64)),
+            rng: ReplayRng::seed_from_u64(seed),
+        }
+    }
+
+    /// The Worker's goals, by environment.
+    pub(super) fn goals(&self) -> impl Iterator<Item = &WorkerGoal> {
+        self.envs.iter().map(|e| &e.goal)
+    }
+
+    /// The traversal under way in each environment.
+    pub(super) fn traversals(&self) -> Vec<Option<&Traversal>> {
+        self.envs.iter().map(|e| e.traversal.as_ref()).collect()
+    }
+
+    /// Books a task reward of environment `e`'s step for the Manager's
+    /// interval under way.
+    pub(super) fn book_manager_reward(&mut self, e: usize, reward: f32) {
+        if let Some(q) = self.queues[e].decisions.last_mut() {
+            q.rewards.push(reward);
+        }
+    }
+
+    /// Ends environment `e`'s interval: the Manager decides before the next
+    /// step (from a fresh core if `episode_ended`), and the traversal under
+    /// way ends. With `train`, the interval's decision is complete; returns
+    /// whether there was one.
+    pub(super) fn end_interval(&mut self, e: usize, episode_ended: bool, train: bool) -> bool {
+        let c = &mut self.envs[e];
+        c.need_decision = true;
+        c.traversal = None;
+        if episode_ended {
+            c.manager_reset = true;
+        }
+        match self.queues[e].decisions.last_mut() {
+            Some(q) if train => {
+                q.complete = true;
+                q.episode_ended = episode_ended;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Cuts the core states' graphs at the end of a training iteration.
+    pub(super) fn detach(&mut self) {
+        self.worker_state = self.worker_state.detach();
+        if let Some(s) = self.manager_state.as_mut() {
+            *s = s.detach();
+        }
+        if let Some(s) = self.steer_state.as_mut() {
+            *s = s.detach();
+        }
+    }
+
+    /// The controller as a record and a tensor file.
+    pub(super) fn save(&self) -> Result<SavedController, LearnerError> {
+        let record = ControllerRecord {
+            envs: self.envs.clone(),
+            queues: self.queues.clone(),
+            rng: self.rng.state(),
+        };
+        let json = serde_json::to_vec(&record).map_err(|e| LearnerError::Checkpoint {
+            path: "controller".into(),
+            message: e.to_string(),
+        })?;
+        let mut named: Vec<(String, &Tensor)> = Vec::new();
+        for (name, s) in [
+            ("worker", Some(&self.worker_state)),
+            ("manager", self.manager_state.as_ref()),
+            ("steer", self.steer_state.as_ref()),
+            ("manager_init", self.manager_init.as_ref()),
+        ] {
+            if let Some(s) = s {
+                named.push((format!("{name}/h"), &s.h));
+                named.push((format!("{name}/c"), &s.c));
+            }
+        }
+        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), *t)).collect();
+        let mut tensors = Vec::new();
+        Tensor::save_multi_to_stream(&refs, &mut tensors)?;
+        Ok(SavedController {
+            record: json,
+            tensors,
+        })
+    }
+
+    /// Replaces this controller (of an agent built for `envs`
+    /// environments) by [`Self::save`]'s record and tensors of a controller
+    /// of the same agent; `source` names them in errors. `π_g`'s core state
+    /// stays as it is where the record has none.
+    pub(super) fn restore(
+        &mut self,
+        json: &[u8],
+        tensors: &[u8],
+        source: &Path,
+        envs: usize,
+    ) -> Result<(), LearnerError> {
+        let bad = |message: String| LearnerError::Checkpoint {
+            path: source.display().to_string(),
+            message,
+        };
+        let record: ControllerRecord =
+            serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
+        if record.envs.len() != envs || record.queues.len() != envs {
+            return Err(bad(format!(
+                "a controller of {} environments, the agent has {}",
+                record.envs.len(),
+                envs
+            )));
+        }
+        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(tensors))
+            .map_err(|e| bad(e.to_string()))?;
+        let state = |name: &str| -> Result<Option<LstmState>, LearnerError> {
+            let find = |k: String| loaded.iter().find(|(n, _)| *n == k).map(|(_, t)| t.copy());
+            match (find(format!("{name}/h")), find(format!("{name}/c"))) {
+                (Some(h), Some(c)) => Ok(Some(LstmState { h, c })),
+                (None, None) => Ok(None),
+                _ => Err(bad(format!("half a core state {name}"))),
+            }
+        };
+        let worker = state("worker")?.ok_or_else(|| bad("no Worker core state".into()))?;
+        let (manager, steer, manager_init) =
+            (state("manager")?, state("steer")?, state("manager_init")?);
+        if manager.is_some() != self.manager_state.is_some()
+            || worker.h.size() != self.worker_state.h.size()
+        {
+            return Err(bad("the controller is of another agent".into()));
+        }
+        *self = Controller {
+            worker_state: worker,
+            manager_state: manager,
+            steer_state: steer.or_else(|| self.steer_state.take()),
+            envs: record.envs,
+            queues: record.queues,
+            manager_init,
+            rng: ReplayRng::from_state(record.rng),
+        };
+        Ok(())
+    }
+}

@@ -1,0 +1,345 @@
+//! The Manager's side of an agent (Shang et al. 2019, sections 4.1–4.2):
+//! its network ([`Manager`], with the Feudal head of section 4.1 or the
+//! Wide-then-Narrow head of section 4.2), var store and optimiser, the
+//! wide-goal candidates `V` and the narrow window, and its decisions.
+//!
+//! A decision is taken for every environment whose interval ended (or
+//! whose episode started; [`ManagerSide::decide`]): the Manager's core
+//! steps once on the observation, and it picks a goal ([`Pick`]) — FN a
+//! subgoal cell from its softmax over the valid cells; WN a wide goal
+//! `g_w ∈ V` from `π^ω`, then a narrow goal `g_n` in the window around
+//! `g_w` from `π^n`. The Worker starts a fresh goal episode towards it.
+//! While training, each decision joins its environment's queue, and the
+//! Manager learns from the queues after each rollout
+//! ([`ManagerSide::update`]).
+
+use planner::WorldGraph;
+use sim::{Layout, ReplayRng};
+use tch::{Tensor, nn};
+
+use super::config::{AgentConfig, AgentKind, Candidates};
+use super::controller::Controller;
+use super::feudal::{Decision, GoalBias, Manager, ManagerHead};
+use super::stats::{Decisions, Tracing};
+use super::wide_narrow::{self, WideNarrowHead, Window};
+use super::worker::WorkerGoal;
+use crate::a2c::input::{BASE_CHANNELS, CellInput, mask};
+use crate::a2c::net::Trunk;
+use crate::a2c::optim::Adam;
+use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
+use crate::batch_env::ObsView;
+
+/// One Manager choice for one environment.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Pick {
+    /// As trained: FN the subgoal cell, WN the index of `g_w` in `V`.
+    pub(super) wide: i64,
+    /// As trained: WN the window slot of `g_n` (FN: 0).
+    pub(super) narrow: i64,
+    /// The wide goal `g_w` (FN: the subgoal).
+    pub(super) wide_cell: u32,
+    /// The narrow goal `g_n` (FN: the subgoal).
+    pub(super) narrow_cell: u32,
+    /// WN: the local input `s_w(g_w)` of the window.
+    pub(super) local: Vec<f32>,
+    /// WN: the window's valid narrow slots.
+    pub(super) valid: Vec<bool>,
+}
+
+/// The Manager's side of an agent (module docs).
+#[derive(Debug)]
+pub(super) struct ManagerSide {
+    width: usize,
+    height: usize,
+    pub(super) vs: nn::VarStore,
+    pub(super) net: Manager,
+    pub(super) opt: Adam,
+    /// Wide-goal cells `V` (WN; empty for FN).
+    pub(super) candidates: Vec<u32>,
+    /// The narrow window (WN).
+    pub(super) window: Option<Window>,
+}
+
+impl ManagerSide {
+    /// A fresh Manager of `cfg` (FN or WN) on `layout`, WN's candidates
+    /// over `V_all` or the nodes of `graph` (its weights are drawn from
+    /// libtorch's generator: build it under
+    /// [`crate::seeding::init_seeded`]).
+    pub(super) fn new(
+        cfg: &AgentConfig,
+        layout: &Layout,
+        graph: Option<&WorldGraph>,
+    ) -> ManagerSide {
+        let (width, height) = (layout.width, layout.height);
+        let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
+            (AgentKind::WideNarrow, Candidates::All) => planner::pivotal::v_all(layout)
+                .iter()
+                .map(|c| c.0)
+                .collect(),
+            (AgentKind::WideNarrow, _) => graph
+                .map(|g| g.nodes().iter().map(|c| c.0).collect())
+                .unwrap_or_default(),
+            _ => Vec::new(),
+        };
+        let window = (cfg.kind == AgentKind::WideNarrow).then(|| {
+            let side = match cfg.window {
+                0 => wide_narrow::covering_side(cfg.window_side(width), &candidates, layout),
+                n => n,
+            };
+            Window::new(side, layout)
+        });
+        let vs = nn::VarStore::new(tch::Device::Cpu);
+        let trunk = Trunk::new(
+            &vs.root(),
+            BASE_CHANNELS as i64,
+            cfg.conv_channels,
+            cfg.hidden,
+            width,
+            height,
+        );
+        let net = Manager::new(&vs.root(), trunk, |p, hidden| match cfg.kind {
+            AgentKind::WideNarrow => ManagerHead::WideNarrow(WideNarrowHead::new(
+                p,
+                hidden,
+                candidates.len(),
+                window.as_ref().map_or(1, Window::len),
+            )),
+            _ => Manager::feudal_head(p, hidden, &valid_cells(layout)),
+        });
+        let net = if cfg.goal_map {
+            let cells = (cfg.kind == AgentKind::WideNarrow).then_some(&candidates[..]);
+            let windows = window.as_ref().filter(|_| cfg.goal_map_windows);
+            net.with_goal_map(
+                &vs.root(),
+                (cfg.conv_channels[0] / 2).max(1),
+                cells,
+                windows,
+            )
+        } else {
+            net
+        };
+        let opt = Adam::new(&[("manager", &vs)], cfg.manager.learning_rate);
+        ManagerSide {
+            width,
+            height,
+            vs,
+            net,
+            opt,
+            candidates,
+            window,
+        }
+    }
+
+    /// The Manager decides for every environment of `ctl` that needs a new
+    /// goal, on `obs`: its core steps, it picks the goals, and the Worker
+    /// starts a fresh goal episode towards them. With `record`, the
+    /// decisions join the training queues; `trace` records the traced
+    /// environment's.
+    pub(super) fn decide(
+        &self,
+        ctl: &mut Controller,
+        obs: &ObsView<'_>,
+        record: bool,
+        mut trace: Option<&mut Tracing<'_>>,
+    ) -> Decisions {
+        let mut made = Decisions::default();
+        let who: Vec<usize> = (0..ctl.envs.len())
+            .filter(|&e| ctl.envs[e].need_decision)
+            .collect();
+        if who.is_empty() {
+            return made;
+        }
+        let idx = Tensor::from_slice(&who.iter().map(|&e| e as i64).collect::<Vec<_>>());
+        let mut input = CellInput::new(self.width, self.height, 0);
+        for &e in &who {
+            input.push_env(obs, e, None);
+        }
+        let resets: Vec<bool> = who.iter().map(|&e| ctl.envs[e].manager_reset).collect();
+        let state = ctl
+            .manager_state
+            .as_ref()
+            .expect("a Manager has a core state")
+            .select(&idx)
+            .reset_done(&mask(&resets));
+        let step = self.net.act(&input, &state);
+        let bias = tch::no_grad(|| self.net.goal_bias(&input));
+        ctl.manager_state
+            .as_mut()
+            .expect("state")
+            .scatter(&idx, &step.state);
+        let picks = match self.net.head() {
+            ManagerHead::Feudal { .. } => self.pick_feudal(&step.h, bias.as_ref(), &mut ctl.rng),
+            ManagerHead::WideNarrow(head) => {
+                self.pick_wide_narrow(head, &step.h, bias.as_ref(), obs, &who, &mut ctl.rng)
+            }
+        };
+        for (j, (&e, pick)) in who.iter().zip(picks).enumerate() {
+            let c = &mut ctl.envs[e];
+            if record {
+                let mut one = CellInput::new(self.width, self.height, 0);
+                one.push_env(obs, e, None);
+                ctl.queues[e].decisions.push(Decision {
+                    input: one,
+                    wide: pick.wide,
+                    narrow: pick.narrow,
+                    local: pick.local,
+                    valid: pick.valid,
+                    value: step.values[j],
+                    reset_before: c.manager_reset,
+                    rewards: Vec::new(),
+                    complete: false,
+                    episode_ended: false,
+                    final_value: None,
+                });
+            }
+            if let Some(t) = trace.as_deref_mut() {
+                t.decision(e, pick.wide_cell, pick.narrow_cell);
+            }
+            let (gw, gn) = (pick.wide_cell, pick.narrow_cell);
+            c.need_decision = false;
+            c.manager_reset = false;
+            c.goal = WorkerGoal::new(gw, gn, obs.meta[e].cell(self.width) as u32);
+            made.count += 1;
+            let named = obs.env_cells(e).get(gn as usize).copied();
+            made.exit_goals += usize::from(named == Some(sim::Object::Exit as u8));
+            made.ball_goals += usize::from(named == Some(sim::Object::Ball as u8));
+        }
+        // A fresh goal episode for the Worker.
+        let fresh: Vec<bool> = (0..ctl.envs.len()).map(|e| who.contains(&e)).collect();
+        ctl.worker_state = ctl.worker_state.reset_done(&mask(&fresh));
+        made
+    }
+
+    /// FN: a subgoal cell per core output of `h` (section 4.1), drawn from
+    /// the softmax over the valid cells (plus the goal map's `bias`).
+    fn pick_feudal(&self, h: &Tensor, bias: Option<&GoalBias>, rng: &mut ReplayRng) -> Vec<Pick> {
+        let pi = self
+            .net
+            .feudal_policy(h, bias.map(|b| &b.wide))
+            .expect("feudal");
+        crate::seeding::sample_index(rng, &pi.probs())
+            .into_iter()
+            .map(|cell| Pick {
+                wide: cell as i64,
+                narrow: 0,
+                wide_cell: cell as u32,
+                narrow_cell: cell as u32,
+                local: Vec::new(),
+                valid: Vec::new(),
+            })
+            .collect()
+    }
+
+    /// WN: for the environments `who` of `obs` (core outputs `h`), a wide
+    /// goal `g_w` from `π^ω`, then a narrow goal `g_n` from `π^n` among the
+    /// valid cells of the window around it (section 4.2), each plus the
+    /// goal map's logits `bias` where it reaches them. The agent's own cell is no narrow goal (reaching
+    /// means arriving), unless the window holds nothing else.
+    fn pick_wide_narrow(
+        &self,
+        head: &WideNarrowHead,
+        h: &Tensor,
+        bias: Option<&GoalBias>,
+        obs: &ObsView<'_>,
+        who: &[usize],
+        rng: &mut ReplayRng,
+    ) -> Vec<Pick> {
+        let window = self.window.as_ref().expect("WN has a window");
+        let wide = crate::seeding::sample_index(rng, &head.wide(h, bias.map(|b| &b.wide)).probs());
+        let mut locals = Vec::new();
+        let mut valids = Vec::new();
+        for (j, &e) in who.iter().enumerate() {
+            let gw = self.candidates[wide[j]];
+            locals.push(window.local_input(obs, e, gw));
+            let mut valid = window.valid(gw);
+            let here = obs.meta[e].cell(self.width) as u32;
+            if let Some(k) = window.slot_of(gw, here)
+                && valid.iter().filter(|&&v| v).count() > 1
+            {
+                valid[k] = false;
+            }
+            valids.push(valid);
+        }
+        let local = Tensor::from_slice(&locals.concat()).view([who.len() as i64, -1]);
+        let valid = Tensor::from_slice(&valids.concat()).view([who.len() as i64, -1]);
+        let wide_idx = Tensor::from_slice(&wide.iter().map(|&k| k as i64).collect::<Vec<_>>());
+        let narrow = tch::no_grad(|| {
+            let map = bias
+                .and_then(|b| b.windows.as_ref())
+                .map(|w| WideNarrowHead::narrow_bias(w, &wide_idx));
+            crate::seeding::sample_index(
+                rng,
+                &head
+                    .narrow(h, &wide_idx, &local, &valid, map.as_ref())
+                    .probs(),
+            )
+        });
+        (0..who.len())
+            .map(|j| {
+                let gw = self.candidates[wide[j]];
+                Pick {
+                    wide: wide[j] as i64,
+                    narrow: narrow[j] as i64,
+                    wide_cell: gw,
+                    narrow_cell: window
+                        .cell(gw, narrow[j])
+                        .expect("a valid slot is inside the grid"),
+                    local: std::mem::take(&mut locals[j]),
+                    valid: std::mem::take(&mut valids[j]),
+                }
+            })
+            .collect()
+    }
+
+    /// Bootstraps the intervals of environments `cut`, which the episode's
+    /// step limit cut, from the Manager's values of their final states.
+    pub(super) fn bootstrap_cut(&self, ctl: &mut Controller, obs: &ObsView<'_>, cut: &[usize]) {
+        let state = ctl.manager_state.as_ref().expect("a Manager has a state");
+        for (&e, v) in cut.iter().zip(self.net.final_values(obs, state, cut)) {
+            if let Some(q) = ctl.queues[e].decisions.last_mut() {
+                q.final_value = Some(v);
+            }
+        }
+    }
+
+    /// The Manager's A2C update on the decision queues of `ctl` (`cfg`: its
+    /// settings), after which each queue keeps only its interval under way;
+    /// the time it took goes to `times`.
+    pub(super) fn update(
+        &mut self,
+        ctl: &mut Controller,
+        cfg: &A2cConfig,
+        times: &mut PhaseTimes,
+    ) -> LossFigures {
+        let t0 = std::time::Instant::now();
+        let init = ctl.manager_init.take().expect("Manager init state");
+        let l = self.net.loss(&ctl.queues, &init, cfg, cfg.gamma);
+        let t1 = PhaseTimes::lap(&mut times.loss, t0);
+        if l.figures.entries > 0.0 {
+            self.opt.backward_step(&l.loss, cfg.grad_clip_norm);
+        }
+        PhaseTimes::lap(&mut times.backward, t1);
+        ctl.manager_init = Some(l.next_init);
+        for q in &mut ctl.queues {
+            let last = q.decisions.pop();
+            q.decisions.clear();
+            q.decisions.extend(last);
+        }
+        l.figures
+    }
+
+    /// Model FLOPs of one decision: the Manager's forward and backward.
+    pub(super) fn flops_per_decision(&self) -> f64 {
+        let (c1, rest) = crate::a2c::net::trunk_macs(self.net.trunk(), Some(10.0));
+        2.0 * 3.0 * (c1 + rest)
+    }
+}
+
+/// Which cells of `layout` can be an FN subgoal: every valid cell.
+fn valid_cells(layout: &Layout) -> Vec<bool> {
+    let mut v = vec![false; layout.width * layout.height];
+    for c in planner::pivotal::v_all(layout) {
+        v[c.index()] = true;
+    }
+    v
+}

@@ -1,0 +1,371 @@
+//! Running a stage 2 agent (Shang et al. 2019, section 4): one environment
+//! step of the whole batch, and the training iterations and evaluations
+//! made of them.
+//!
+//! A batch step ([`HrlAgent::step_batch`]):
+//!
+//! 1. the Manager decides for every environment that needs a goal — its
+//!    episode started or its interval ended (sections 4.1–4.2;
+//!    `ManagerSide::decide`);
+//! 2. an environment whose agent stands on a pivotal state with a route to
+//!    its wide goal hands over to a world graph traversal (section 4.3);
+//! 3. the Worker (the baseline) samples every environment's action, and a
+//!    traversal under way overrides it with its own;
+//! 4. the environments step;
+//! 5. each step is booked: the task's reward for the Manager's interval,
+//!    the Worker's reward from its goals ([`super::worker`]; a Worker that
+//!    now stands where a traversal can start hands over to it) or the
+//!    traversal's progress ([`traversal::book_step`]), and where the
+//!    interval ends, a decision is due at the next step.
+//!
+//! Training records the steps in the Worker's rollout and the Manager's
+//! decision queues and updates both after `T` steps
+//! ([`HrlAgent::train_iteration`]); evaluation plays one episode per
+//! environment without recording ([`HrlAgent::evaluate`]).
+
+use sim::action;
+
+use super::a2c;
+use super::agent::{EVAL_SALT, HrlAgent};
+use super::config::HandOver;
+use super::controller::Controller;
+use super::stats::{EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, reached_exit};
+use super::steering::Leg;
+use super::traversal::{self, Execution, Traversal};
+use super::worker::{EpisodeEnd, WorkerStep};
+use crate::a2c::LossFigures;
+use crate::a2c::input::mask;
+use crate::a2c::net::LstmState;
+use crate::batch_env::{BatchEnvironment, ObsView};
+use crate::error::LearnerError;
+
+/// What the agent chose before a batch step.
+struct Acted {
+    /// Each environment's action.
+    actions: Vec<u8>,
+    /// The Worker's core state after the step.
+    state: LstmState,
+    /// `π_g` steered the step and it is recorded for its fine-tuning.
+    steered: bool,
+}
+
+/// The booking of one batch step, by environment.
+struct StepBook {
+    /// The Worker's (the baseline's) rewards.
+    rewards: Vec<f32>,
+    /// The Worker's goal episode (the baseline's episode) ended.
+    dones: Vec<bool>,
+    /// 1 where the Worker chose the action, 0 for a traversal's.
+    weights: Vec<f32>,
+    /// Worker goal episodes (baseline episodes) that the step limit cut:
+    /// bootstrapped from their final states.
+    cut_worker: Vec<usize>,
+    /// Manager intervals that the step limit cut, likewise.
+    cut_manager: Vec<usize>,
+    /// How the step went for `π_g`'s fine-tuning.
+    legs: Vec<Leg>,
+}
+
+impl StepBook {
+    fn new(n: usize) -> StepBook {
+        StepBook {
+            rewards: vec![0f32; n],
+            dones: vec![false; n],
+            weights: vec![0f32; n],
+            cut_worker: Vec::new(),
+            cut_manager: Vec::new(),
+            legs: vec![Leg::Idle; n],
+        }
+    }
+}
+
+impl HrlAgent {
+    /// Before a batch step on `obs`: the Manager's decisions, the
+    /// traversals that start, the Worker's actions and the traversals'.
+    fn act(
+        &mut self,
+        ctl: &mut Controller,
+        obs: &ObsView<'_>,
+        train: bool,
+        trace: Option<&mut Tracing<'_>>,
+        stats: &mut StepCounts,
+    ) -> Result<Acted, LearnerError> {
+        if let Some(m) = &self.manager {
+            stats.add(m.decide(ctl, obs, train, trace));
+        }
+        if self.traverser.graph().is_some() {
+            for (e, c) in ctl.envs.iter_mut().enumerate() {
+                self.traverser.try_start(&c.goal, &mut c.traversal, obs, e);
+            }
+        }
+        let marks = self.worker.goal_marks(ctl.goals());
+        let out = self.worker.act(obs, &marks, &ctl.worker_state, train);
+        let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
+        let mut actions = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
+        let traversals: Vec<Option<&Traversal>> =
+            ctl.envs.iter().map(|c| c.traversal.as_ref()).collect();
+        let steered = self.traverser.actions(
+            &traversals,
+            &mut ctl.steer_state,
+            &mut ctl.rng,
+            obs,
+            &mut actions,
+            train,
+        )?;
+        Ok(Acted {
+            actions,
+            state: out.state,
+            steered,
+        })
+    }
+
+    /// One environment step of the whole batch (module docs). With
+    /// `train`, the step is recorded in the rollout and the decision
+    /// queues; `trace` follows the traced environment.
+    pub(super) fn step_batch(
+        &mut self,
+        ctl: &mut Controller,
+        env: &mut dyn BatchEnvironment,
+        train: bool,
+        mut trace: Option<&mut Tracing<'_>>,
+        stats: &mut StepCounts,
+    ) -> Result<(), LearnerError> {
+        let n = env.num_envs();
+        let acted = {
+            let obs = env.observe();
+            self.act(ctl, &obs, train, trace.as_deref_mut(), stats)?
+        };
+        let traversing: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.is_some()).collect();
+        // The steered legs before the step (for π_g's fine-tuning).
+        let legs_before: Vec<Option<usize>> = ctl
+            .envs
+            .iter()
+            .map(|c| {
+                c.traversal
+                    .as_ref()
+                    .filter(|t| t.execution() == Execution::Steer)
+                    .map(Traversal::leg)
+            })
+            .collect();
+        let t1 = std::time::Instant::now();
+        env.step(&acted.actions)?;
+        self.times.step += t1.elapsed().as_secs_f64();
+        let obs = env.observe();
+        let mut book = StepBook::new(n);
+        for e in 0..n {
+            let m = &obs.meta[e];
+            let end = EpisodeEnd::of(m);
+            let ended = end.ended();
+            // Where the action led the agent: on a step that ended the
+            // episode, its final cell (the observation is the next start).
+            let cell = obs.end_cell(e);
+            stats.count_step(&obs, e, ended);
+            if let Some(t) = trace.as_deref_mut() {
+                t.step(&obs, e, cell, traversing[e], ended);
+            }
+            if self.manager.is_none() {
+                (book.rewards[e], book.dones[e]) = a2c::task_step(m);
+                if m.truncated() {
+                    book.cut_worker.push(e);
+                }
+                book.weights[e] = 1.0;
+                continue;
+            }
+            let mut interval_over = ended;
+            if train {
+                ctl.book_manager_reward(e, m.reward);
+            }
+            if traversing[e] {
+                stats.traversal_steps += 1;
+                book.dones[e] = true;
+                let c = &mut ctl.envs[e];
+                let s = traversal::book_step(
+                    &mut c.traversal,
+                    &mut c.goal,
+                    cell,
+                    ended,
+                    self.horizon,
+                    legs_before[e],
+                );
+                book.legs[e] = s.leg;
+                stats.reached += usize::from(s.reached);
+                interval_over |= s.interval_over;
+            } else {
+                let s = self.book_worker_step(ctl, &obs, e, cell, end);
+                stats.reached += usize::from(s.reached);
+                interval_over |= s.interval_over;
+                if s.bootstrap {
+                    book.cut_worker.push(e);
+                }
+                book.rewards[e] = s.reward;
+                book.dones[e] = s.done;
+                book.weights[e] = 1.0;
+            }
+            if interval_over && book.legs[e] == Leg::Going {
+                book.legs[e] = Leg::Ended;
+            }
+            if interval_over {
+                stats.intervals += 1;
+                book.dones[e] = true;
+                if ctl.end_interval(e, ended, train) && end == EpisodeEnd::Truncated {
+                    book.cut_manager.push(e);
+                }
+            }
+        }
+        if train {
+            // Truncation is not termination (Gymnasium's final_obs): the
+            // cut steps' targets go on from their final states' values.
+            if !book.cut_worker.is_empty() {
+                let marks = self.worker.goal_marks(ctl.goals());
+                self.worker.bootstrap_truncated(
+                    &mut book.rewards,
+                    &obs,
+                    &marks,
+                    &acted.state,
+                    &book.cut_worker,
+                    self.cfg.worker.gamma,
+                );
+            }
+            if let Some(m) = &self.manager
+                && !book.cut_manager.is_empty()
+            {
+                m.bootstrap_cut(ctl, &obs, &book.cut_manager);
+            }
+            self.worker
+                .rollout
+                .record(&acted.actions, &book.rewards, &book.dones, &book.weights);
+        }
+        if acted.steered {
+            self.traverser.book_steered(&acted.actions, &book.legs);
+        }
+        ctl.worker_state = acted.state.reset_done(&mask(&book.dones));
+        Ok(())
+    }
+
+    /// Books the Worker's step in environment `e` of `obs`, which led the
+    /// agent to `cell` with the episode's state `end`; where the interval
+    /// goes on and a traversal towards `g_w` can start from there, the
+    /// Worker hands over to it (section 4.3), paid as [`HandOver`] says.
+    fn book_worker_step(
+        &mut self,
+        ctl: &mut Controller,
+        obs: &ObsView<'_>,
+        e: usize,
+        cell: u32,
+        end: EpisodeEnd,
+    ) -> WorkerStep {
+        let c = &mut ctl.envs[e];
+        let mut s = c.goal.book(
+            cell,
+            end,
+            self.horizon,
+            self.cfg.goal_reward,
+            self.cfg.step_penalty,
+            self.cfg.worker_task_end,
+        );
+        if !s.interval_over && self.traverser.try_start(&c.goal, &mut c.traversal, obs, e) {
+            let pay = match self.cfg.hand_over {
+                HandOver::PaysWideGoal => self.cfg.goal_reward,
+                HandOver::Unpaid => 0.0,
+            };
+            c.goal.hand_over(&mut s, pay);
+        }
+        s
+    }
+
+    /// One training iteration: a rollout of `T` steps, then the Worker's
+    /// (baseline's) and the Manager's updates.
+    pub fn train_iteration(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+    ) -> Result<IterationStats, LearnerError> {
+        self.check_batch(env)?;
+        let empty = self.controller(0, 0);
+        let mut ctl = std::mem::replace(&mut self.ctl, empty);
+        self.worker.rollout.start(&ctl.worker_state);
+        self.traverser.start_fine_tuning(ctl.steer_state.as_ref());
+        let mut counts = StepCounts::default();
+        for _ in 0..self.cfg.rollout_len {
+            self.step_batch(&mut ctl, env, true, None, &mut counts)?;
+        }
+        {
+            let obs = env.observe();
+            if let Some(m) = &self.manager {
+                counts.add(m.decide(&mut ctl, &obs, true, None));
+            }
+            let marks = self.worker.goal_marks(ctl.goals());
+            self.worker.bootstrap(&obs, &marks, &ctl.worker_state);
+            self.traverser
+                .fine_tune(&obs, &ctl.traversals(), ctl.steer_state.as_ref());
+        }
+        let worker = self.worker.update(&self.cfg.worker, &mut self.times);
+        let manager = match self.manager.as_mut() {
+            Some(m) => m.update(&mut ctl, &self.cfg.manager, &mut self.times),
+            None => LossFigures::default(),
+        };
+        ctl.detach();
+        self.ctl = ctl;
+        Ok(counts.iteration(worker, manager))
+    }
+
+    /// Plays one episode in every environment of `env` (freshly reset)
+    /// with actions sampled from the policy (RNG seeded by `seed`), without
+    /// training; `trace` records environment 0's episode.
+    pub fn evaluate(
+        &mut self,
+        env: &mut dyn BatchEnvironment,
+        seed: u64,
+        trace: Option<&mut EpisodeTrace>,
+    ) -> Result<EvalResult, LearnerError> {
+        let n = env.num_envs();
+        env.step(&vec![action::RESET; n])?;
+        let mut ctl = self.controller(n, sim::env_seed(seed ^ EVAL_SALT, 0));
+        let mut done = vec![false; n];
+        let mut returns = vec![0f32; n];
+        let mut lengths = vec![0u32; n];
+        let mut success = vec![false; n];
+        let mut counts = StepCounts::default();
+        let mut trace = trace.map(|t| {
+            *t = EpisodeTrace::default();
+            let obs = env.observe();
+            t.cells.push(obs.meta[0].cell(self.width) as u32);
+            t.start_cells = obs.env_cells(0).to_vec();
+            Tracing {
+                env: 0,
+                step: 0,
+                trace: t,
+            }
+        });
+        while done.iter().any(|d| !d) {
+            let traced = trace.as_mut().filter(|_| !done[0]);
+            self.step_batch(&mut ctl, env, false, traced, &mut counts)?;
+            let obs = env.observe();
+            for e in 0..n {
+                let m = &obs.meta[e];
+                if !done[e] && m.done() {
+                    done[e] = true;
+                    returns[e] = m.episode_return;
+                    lengths[e] = m.episode_len;
+                    success[e] = reached_exit(&obs, e);
+                }
+            }
+        }
+        if let Some(t) = trace {
+            t.trace.episode_return = returns[0];
+        }
+        let mean_return = returns.iter().map(|&r| f64::from(r)).sum::<f64>() / n.max(1) as f64;
+        let success_rate = success.iter().filter(|&&s| s).count() as f64 / n.max(1) as f64;
+        Ok(EvalResult {
+            score: if self.task == sim::Task::DoorKey {
+                success_rate
+            } else {
+                mean_return
+            },
+            mean_return,
+            success_rate,
+            returns,
+            lengths,
+            traversal_share: counts.traversal_share(),
+        })
+    }
+}

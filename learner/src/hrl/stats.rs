@@ -1,0 +1,282 @@
+//! What running a stage 2 agent reports: a training iteration's figures
+//! ([`IterationStats`]), an evaluation's scores ([`EvalResult`]) and one
+//! evaluation episode for the picture of the paper's Figure 1
+//! ([`EpisodeTrace`]); and, inside the agent, the counts a batch step adds
+//! to (`StepCounts`, `Decisions`) and the trace of the episode under way
+//! (`Tracing`).
+
+use serde::{Deserialize, Serialize};
+
+use crate::a2c::LossFigures;
+use crate::batch_env::ObsView;
+
+/// What one iteration measured.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct IterationStats {
+    /// Env steps of the iteration.
+    pub env_steps: u64,
+    /// Episodes that ended.
+    pub episodes: usize,
+    /// Mean return of those episodes (0 when none).
+    pub mean_return: f64,
+    /// The Worker's (or the baseline's) loss.
+    pub worker: LossFigures,
+    /// The Manager's loss (zeros for A2C).
+    pub manager: LossFigures,
+    /// Manager intervals that ended (FN, WN).
+    pub intervals: usize,
+    /// Share of those in which the Worker reached `g_n`.
+    pub goals_reached: f64,
+    /// Share of env steps taken by graph traversal.
+    pub traversal_share: f64,
+    /// Share of the episodes that ended by reaching the exit.
+    pub exit_share: f64,
+    /// Manager decisions made (FN, WN).
+    pub decisions: usize,
+    /// Share of those whose narrow goal `g_n` is the exit.
+    pub exit_goal_share: f64,
+    /// Share of those whose narrow goal `g_n` held a ball when named.
+    pub ball_goal_share: f64,
+    /// Share of the episodes that ended carrying the key (Door-Key).
+    pub key_share: f64,
+    /// Share of the episodes whose final grid has an open door (Door-Key:
+    /// the agent opened the locked one).
+    pub door_share: f64,
+}
+
+/// The result of an evaluation: one episode per environment.
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalResult {
+    /// Mean return (MultiGoal tasks) or success rate (Door-Key).
+    pub score: f64,
+    /// Mean episode return.
+    pub mean_return: f64,
+    /// Share of episodes that reached the exit.
+    pub success_rate: f64,
+    /// Episode returns, by environment.
+    pub returns: Vec<f32>,
+    /// Episode lengths.
+    pub lengths: Vec<u32>,
+    /// Share of steps taken by traversal.
+    pub traversal_share: f64,
+}
+
+/// One evaluation episode, for the picture of the paper's Figure 1.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct EpisodeTrace {
+    /// The agent's cell before the first step and after each (after the
+    /// last, the cell the episode ended on).
+    pub cells: Vec<u32>,
+    /// Whether each step was taken by traversal.
+    pub traversed: Vec<bool>,
+    /// Manager decisions: `(step, g_w, g_n)`.
+    pub goals: Vec<(u32, u32, u32)>,
+    /// The episode's return.
+    pub episode_return: f32,
+    /// The grid the episode started on (row-major object codes, as
+    /// `sim::Object`): its balls, key, doors, exit.
+    #[serde(default)]
+    pub start_cells: Vec<u8>,
+    /// The grid the episode ended on (the step record's final cells of the
+    /// step that ended it): a ball of `start_cells` missing here was
+    /// collected. Empty when the transport carries no final cells.
+    #[serde(default)]
+    pub end_cells: Vec<u8>,
+}
+
+/// Counts of one rollout or evaluation.
+#[derive(Debug, Default)]
+pub(super) struct StepCounts {
+    /// Environment steps.
+    pub(super) steps: u64,
+    /// Episodes that ended.
+    pub(super) episodes: usize,
+    /// The sum of their returns.
+    pub(super) returns: f64,
+    /// Those that ended on the exit.
+    pub(super) successes: usize,
+    /// Those that ended carrying the key.
+    pub(super) with_key: usize,
+    /// Those whose final grid has an open door.
+    pub(super) door_open: usize,
+    /// Manager intervals that ended.
+    pub(super) intervals: usize,
+    /// Intervals in which `g_n` was reached.
+    pub(super) reached: usize,
+    /// Steps taken by world graph traversal.
+    pub(super) traversal_steps: u64,
+    /// Manager decisions.
+    pub(super) decisions: usize,
+    /// Decisions whose `g_n` was the exit.
+    pub(super) exit_goals: usize,
+    /// Decisions whose `g_n` held a ball.
+    pub(super) ball_goals: usize,
+}
+
+impl StepCounts {
+    /// Adds the decisions of one call of the Manager.
+    pub(super) fn add(&mut self, d: Decisions) {
+        self.decisions += d.count;
+        self.exit_goals += d.exit_goals;
+        self.ball_goals += d.ball_goals;
+    }
+
+    /// Counts environment `e`'s step that produced `obs`; `ended`: the step
+    /// ended the episode.
+    pub(super) fn count_step(&mut self, obs: &ObsView<'_>, e: usize, ended: bool) {
+        if ended {
+            self.episodes += 1;
+            self.returns += f64::from(obs.meta[e].episode_return);
+            self.successes += usize::from(reached_exit(obs, e));
+            self.with_key += usize::from(obs.meta[e].end_carrying == sim::Object::Key as u8);
+            let cells = obs.width * obs.height;
+            self.door_open += usize::from(
+                obs.final_cells
+                    .get(e * cells..(e + 1) * cells)
+                    .is_some_and(|g| g.contains(&(sim::Object::DoorOpen as u8))),
+            );
+        }
+        self.steps += 1;
+    }
+
+    /// The share of the steps taken by traversal.
+    pub(super) fn traversal_share(&self) -> f64 {
+        self.traversal_steps as f64 / self.steps.max(1) as f64
+    }
+
+    /// The figures of a training iteration of these counts and the
+    /// Worker's and the Manager's losses.
+    pub(super) fn iteration(&self, worker: LossFigures, manager: LossFigures) -> IterationStats {
+        IterationStats {
+            env_steps: self.steps,
+            episodes: self.episodes,
+            mean_return: if self.episodes > 0 {
+                self.returns / self.episodes as f64
+            } else {
+                0.0
+            },
+            worker,
+            manager,
+            intervals: self.intervals,
+            goals_reached: if self.intervals > 0 {
+                self.reached as f64 / self.intervals as f64
+            } else {
+                0.0
+            },
+            traversal_share: self.traversal_share(),
+            exit_share: self.successes as f64 / self.episodes.max(1) as f64,
+            decisions: self.decisions,
+            exit_goal_share: self.exit_goals as f64 / self.decisions.max(1) as f64,
+            ball_goal_share: self.ball_goals as f64 / self.decisions.max(1) as f64,
+            key_share: self.with_key as f64 / self.episodes.max(1) as f64,
+            door_share: self.door_open as f64 / self.episodes.max(1) as f64,
+        }
+    }
+}
+
+/// Whether environment `e`'s episode ended, with the step that produced
+/// `obs`, by the agent stepping onto the exit (its success; judged on the
+/// final state, since the observation is the next episode's start).
+pub(super) fn reached_exit(obs: &ObsView<'_>, e: usize) -> bool {
+    let m = &obs.meta[e];
+    m.terminated()
+        && obs
+            .final_cells
+            .get(e * obs.width * obs.height + obs.end_cell(e) as usize)
+            .is_some_and(|&c| c == sim::Object::Exit as u8)
+}
+
+/// The evaluation episode being traced: environment `env`'s, `step` steps
+/// in.
+#[derive(Debug)]
+pub(super) struct Tracing<'a> {
+    /// The traced environment.
+    pub(super) env: usize,
+    /// Steps taken so far.
+    pub(super) step: u32,
+    /// The trace.
+    pub(super) trace: &'a mut EpisodeTrace,
+}
+
+impl Tracing<'_> {
+    /// Records the Manager's decision `(g_w, g_n)` in environment `e`.
+    pub(super) fn decision(&mut self, e: usize, wide: u32, narrow: u32) {
+        if e == self.env {
+            self.trace.goals.push((self.step, wide, narrow));
+        }
+    }
+
+    /// Records environment `e`'s step that produced `obs` and led the agent
+    /// to `cell` (`traversed`: by traversal; `ended`: the step ended the
+    /// episode, whose final grid the step record holds).
+    pub(super) fn step(
+        &mut self,
+        obs: &ObsView<'_>,
+        e: usize,
+        cell: u32,
+        traversed: bool,
+        ended: bool,
+    ) {
+        if e != self.env {
+            return;
+        }
+        let t = &mut *self.trace;
+        t.cells.push(cell);
+        t.traversed.push(traversed);
+        self.step += 1;
+        if ended {
+            let cpe = obs.width * obs.height;
+            t.end_cells = obs
+                .final_cells
+                .get(e * cpe..(e + 1) * cpe)
+                .map(<[u8]>::to_vec)
+                .unwrap_or_default();
+        }
+    }
+}
+
+/// The Manager's decisions of one call of
+/// [`ManagerSide::decide`](super::manager::ManagerSide::decide).
+#[derive(Debug, Default, Clone, Copy)]
+pub(super) struct Decisions {
+    /// Decisions made.
+    pub(super) count: usize,
+    /// Decisions whose narrow goal `g_n` is an exit cell.
+    pub(super) exit_goals: usize,
+    /// Decisions whose narrow goal `g_n` holds a ball.
+    pub(super) ball_goals: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::batch_env::{BatchEnvironment, InProcess};
+    use sim::{EnvConfig, Layout, Task, action};
+
+    /// Door-Key's figures come from the final state of an episode: an
+    /// episode cut by the step limit after the agent picked up the key and
+    /// opened the door counts in both; one that did neither in none.
+    #[test]
+    fn an_episode_that_took_the_key_and_opened_the_door_counts_in_both_shares() {
+        let layout = Layout::parse("door", "######\n#>KD.#\n#...E#\n######").expect("layout");
+        let cfg = EnvConfig {
+            task: Task::DoorKey,
+            max_steps: 3,
+            ..EnvConfig::for_task(Task::DoorKey, &layout)
+        };
+        let mut env = InProcess::new(layout, cfg, 2, 0, 1).expect("env");
+        let mut counts = StepCounts::default();
+        // Environment 0 picks up the key, steps onto its cell, opens the
+        // door; environment 1 turns on the spot.
+        for a in [action::PICKUP, action::FORWARD, action::TOGGLE] {
+            env.step(&[a, action::LEFT]).expect("step");
+            let obs = env.observe();
+            for e in 0..2 {
+                counts.count_step(&obs, e, obs.meta[e].done());
+            }
+        }
+        let s = counts.iteration(LossFigures::default(), LossFigures::default());
+        assert_eq!(s.episodes, 2, "the step limit ends both episodes");
+        assert_eq!((s.key_share, s.door_share), (0.5, 0.5));
+    }
+}

@@ -1,0 +1,351 @@
+//! Tests of the agent as a whole: its steps' booking and the Worker's
+//! view of its goals.
+
+use shm_schemas::EnvMeta;
+use sim::{AutoReset, BallSpawn, EnvConfig, Layout, Task};
+
+use super::worker::{WorkerGoal, goal_marks};
+use super::*;
+use crate::a2c::input::{GoalMarks, NO_GOAL};
+use crate::batch_env::{BatchEnvironment, EnvError, InProcess, ObsView};
+
+/// A batch environment that keeps every step record it produced.
+struct Recorder {
+    env: InProcess,
+    steps: Vec<Vec<EnvMeta>>,
+}
+
+impl BatchEnvironment for Recorder {
+    fn num_envs(&self) -> usize {
+        self.env.num_envs()
+    }
+    fn num_actions(&self) -> usize {
+        self.env.num_actions()
+    }
+    fn observe(&self) -> ObsView<'_> {
+        self.env.observe()
+    }
+    fn step(&mut self, actions: &[u8]) -> Result<(), EnvError> {
+        self.env.step(actions)?;
+        self.steps.push(self.env.observe().meta.to_vec());
+        Ok(())
+    }
+}
+
+#[test]
+fn a_truncated_step_is_bootstrapped_and_a_terminated_one_is_not() {
+    // A corridor whose exit is two moves away and a step limit of 3:
+    // random actions end episodes both ways.
+    let layout = Layout::parse("corridor", "#####\n#>.E#\n#####\n").expect("layout");
+    let env_cfg = EnvConfig {
+        task: Task::MultiGoal,
+        max_steps: 3,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::SameStep,
+    };
+    let cfg = AgentConfig {
+        kind: AgentKind::A2c,
+        envs: 8,
+        rollout_len: 12,
+        hidden: 16,
+        conv_channels: [4, 8],
+        ..AgentConfig::default()
+    };
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 1).expect("agent");
+    let mut env = Recorder {
+        env: InProcess::new(layout.clone(), env_cfg, 8, 2, 1).expect("env"),
+        steps: Vec::new(),
+    };
+    agent.start_segment(&mut env, 0).expect("segment");
+    env.steps.clear();
+    // Keep the rollout: the update does not clear it.
+    agent.train_iteration(&mut env).expect("iteration");
+    let (mut terminated, mut truncated) = (0, 0);
+    let gamma = cfg.worker.gamma as f32;
+    for (t, metas) in env.steps.iter().enumerate() {
+        for (e, m) in metas.iter().enumerate() {
+            let i = t * 8 + e;
+            let (booked, done) = (
+                agent.worker.rollout.rewards[i],
+                agent.worker.rollout.dones[i],
+            );
+            if m.terminated() {
+                terminated += 1;
+                assert_eq!(booked, m.reward, "a terminated step is not bootstrapped");
+                assert_eq!(done, 1.0);
+            } else if m.truncated() {
+                truncated += 1;
+                let bootstrap = booked - m.reward;
+                assert!(
+                    bootstrap.abs() > 1e-6 && bootstrap.abs() <= gamma * 10.0,
+                    "a truncated step adds γ·V(s_final), got {bootstrap}"
+                );
+                assert_eq!(done, 1.0, "nothing flows back from the next episode");
+            } else {
+                assert_eq!(booked, m.reward);
+                assert_eq!(done, 0.0);
+            }
+        }
+    }
+    assert!(
+        terminated > 0 && truncated > 0,
+        "{terminated} / {truncated}"
+    );
+}
+
+#[test]
+fn the_wide_narrow_worker_sees_which_goal_is_which() {
+    let goals = [WorkerGoal::new(5, 9, 1), WorkerGoal::new(9, 5, 1)];
+    let marks = goal_marks(AgentKind::WideNarrow, goals.iter());
+    assert_eq!(marks, vec![5, 9, 9, 5]);
+    let layout = sim::Maze::Small.layout(false);
+    let (cells, meta) = (layout.cells.repeat(2), vec![EnvMeta::EMPTY; 2]);
+    let obs = ObsView {
+        seq: 0,
+        cells: &cells,
+        final_cells: &[],
+        meta: &meta,
+        width: layout.width,
+        height: layout.height,
+    };
+    let dense = crate::a2c::input::encode_obs(
+        &obs,
+        Some(GoalMarks {
+            cells: &marks,
+            per_env: 2,
+        }),
+    );
+    assert!(
+        !dense.get(0).equal(&dense.get(1)),
+        "swapping g_w and g_n changes the Worker's input"
+    );
+    // Once g_w is paid its mark goes.
+    let mut paid = WorkerGoal::new(5, 9, 1);
+    paid.wide_paid = true;
+    let marks = goal_marks(AgentKind::WideNarrow, std::iter::once(&paid));
+    assert_eq!(marks, vec![NO_GOAL, 9]);
+}
+
+/// A corridor nine cells wide: the agent starts on `(1, 1)` facing the
+/// exit on `(7, 1)`.
+const CORRIDOR: &str = "#########\n#>.....E#\n#########\n";
+
+/// The cell index of `(x, y)` in the corridor.
+fn at(x: u32, y: u32) -> u32 {
+    y * 9 + x
+}
+
+/// A small agent of `kind` over `candidates` for `n` environments.
+fn small(kind: AgentKind, candidates: Candidates, n: usize) -> AgentConfig {
+    AgentConfig {
+        kind,
+        candidates,
+        envs: n,
+        rollout_len: 6,
+        horizon: 50,
+        hidden: 16,
+        conv_channels: [4, 8],
+        ..AgentConfig::default()
+    }
+}
+
+/// `n` corridors of MultiGoal whose episodes the step limit `max_steps`
+/// cuts, reset.
+fn corridors(n: usize, max_steps: u32) -> InProcess {
+    let env_cfg = EnvConfig {
+        task: Task::MultiGoal,
+        max_steps,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::SameStep,
+    };
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    InProcess::new(layout, env_cfg, n, 3, 1).expect("env")
+}
+
+/// Gives every environment of `ctl` the goals `(wide, narrow)` as if the
+/// Manager had named them with the agent on `here`.
+fn hand_goals(ctl: &mut controller::Controller, wide: u32, narrow: u32, here: u32) {
+    for c in &mut ctl.envs {
+        c.goal = WorkerGoal::new(wide, narrow, here);
+        c.need_decision = false;
+        c.manager_reset = false;
+    }
+}
+
+#[test]
+fn the_manager_decides_for_every_environment_on_the_first_step() {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 4;
+    let cfg = small(AgentKind::WideNarrow, Candidates::All, n);
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
+    let mut env = corridors(n, 100);
+    let mut ctl = agent.controller(n, 11);
+    agent.worker.rollout.start(&ctl.worker_state);
+    let mut counts = stats::StepCounts::default();
+    agent
+        .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+        .expect("step");
+    assert_eq!(counts.decisions, n, "one decision per environment");
+    assert_eq!(counts.steps, n as u64);
+    let side = agent.window_coverage().expect("WN has a window").side as i64;
+    let free: Vec<u32> = (1..8).map(|x| at(x, 1)).collect();
+    for (e, c) in ctl.envs.iter().enumerate() {
+        let g = c.goal;
+        assert!(agent.candidates().contains(&g.wide), "g_w ∈ V: {g:?}");
+        assert!(free.contains(&g.narrow), "g_n is a free cell: {g:?}");
+        let (dx, dy) = (
+            i64::from(g.narrow % 9) - i64::from(g.wide % 9),
+            i64::from(g.narrow / 9) - i64::from(g.wide / 9),
+        );
+        assert!(
+            dx.abs() <= side / 2 && dy.abs() <= side / 2,
+            "g_n in the window around g_w: {g:?}"
+        );
+        let queue = &ctl.queues[e].decisions;
+        assert_eq!(queue.len(), 1, "the decision joins the training queue");
+        assert!(queue[0].reset_before, "the first decision of an episode");
+        assert_eq!(
+            agent.candidates()[queue[0].wide as usize],
+            g.wide,
+            "the queue trains the wide goal the Worker got"
+        );
+    }
+}
+
+#[test]
+fn the_workers_goal_marks_land_on_the_goal_cells() {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 2;
+    for (kind, planes) in [(AgentKind::WideNarrow, 2), (AgentKind::Feudal, 1)] {
+        let cfg = small(kind, Candidates::All, n);
+        let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
+        let mut env = corridors(n, 100);
+        let mut ctl = agent.controller(n, 11);
+        let (wide, narrow) = (at(6, 1), at(5, 1));
+        hand_goals(&mut ctl, wide, narrow, at(1, 1));
+        let mut counts = stats::StepCounts::default();
+        agent
+            .step_batch(&mut ctl, &mut env, false, None, &mut counts)
+            .expect("step");
+        assert_eq!(counts.decisions, 0, "no decision while the interval runs");
+        let marks = agent.worker.goal_marks(ctl.goals());
+        let input = agent.worker.input(&env.observe(), &marks).to_dense();
+        assert_eq!(
+            input.size()[1],
+            (crate::a2c::input::BASE_CHANNELS + planes) as i64
+        );
+        // FN's Worker sees its one subgoal, g_n; WN's g_w and g_n.
+        let expected: Vec<u32> = match kind {
+            AgentKind::WideNarrow => vec![wide, narrow],
+            _ => vec![narrow],
+        };
+        for e in 0..n as i64 {
+            for (k, &goal) in expected.iter().enumerate() {
+                let plane = input
+                    .get(e)
+                    .get((crate::a2c::input::GOAL_CHANNEL + k) as i64)
+                    .flatten(0, -1);
+                let marked: Vec<f32> = Vec::try_from(&plane).expect("floats");
+                let cells: Vec<u32> = (0..marked.len() as u32)
+                    .filter(|&c| marked[c as usize] == 1.0)
+                    .collect();
+                assert_eq!(cells, vec![goal], "{kind:?} goal plane {k}");
+            }
+        }
+    }
+}
+
+#[test]
+fn an_environment_whose_episode_ends_gets_a_fresh_decision_next_step() {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 3;
+    let cfg = small(AgentKind::WideNarrow, Candidates::All, n);
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
+    // Episodes of two steps; goals five moves away: the first step ends
+    // neither the episode nor the interval, the second ends both.
+    let mut env = corridors(n, 2);
+    let mut ctl = agent.controller(n, 11);
+    agent.worker.rollout.start(&ctl.worker_state);
+    hand_goals(&mut ctl, at(6, 1), at(6, 1), at(1, 1));
+    let mut counts = stats::StepCounts::default();
+    agent
+        .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+        .expect("step");
+    assert_eq!((counts.episodes, counts.intervals), (0, 0));
+    assert!(ctl.envs.iter().all(|c| !c.need_decision));
+    agent
+        .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+        .expect("step");
+    assert_eq!((counts.episodes, counts.intervals), (n, n));
+    assert_eq!(counts.decisions, 0);
+    for c in &ctl.envs {
+        assert!(c.need_decision && c.manager_reset, "a decision is due");
+    }
+    agent
+        .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+        .expect("step");
+    assert_eq!(
+        counts.decisions, n,
+        "every environment got a fresh decision"
+    );
+    for (c, q) in ctl.envs.iter().zip(&ctl.queues) {
+        assert!(!c.need_decision);
+        let d = q.decisions.last().expect("the new decision");
+        assert!(d.reset_before, "the Manager's core starts afresh");
+        assert!(!d.complete);
+    }
+}
+
+#[test]
+fn a_traversal_replays_its_route_and_its_steps_are_counted() {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 2;
+    let planner_cfg = planner::PlannerConfig {
+        candidates: planner::CandidateSet::Given,
+        edge_search: planner::EdgeSearch::Exhaustive,
+        task: Task::MultiGoal,
+        ..planner::PlannerConfig::default()
+    };
+    let nodes = [planner::CellIdx(at(1, 1)), planner::CellIdx(at(4, 1))];
+    let graph = planner::WorldGraph::build(&layout, &planner_cfg, &nodes).expect("graph");
+    let cfg = AgentConfig {
+        traversal: true,
+        ..small(AgentKind::WideNarrow, Candidates::Pivotal, n)
+    };
+    let inputs = WorldGraphInputs {
+        graph: Some(graph),
+        gcp: None,
+    };
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 5).expect("agent");
+    let mut env = corridors(n, 100);
+    let mut ctl = agent.controller(n, 11);
+    agent.worker.rollout.start(&ctl.worker_state);
+    // The agent stands on a node with a route to g_w: it traverses.
+    hand_goals(&mut ctl, at(4, 1), at(5, 1), at(1, 1));
+    let mut counts = stats::StepCounts::default();
+    for step in 1..=3 {
+        agent
+            .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+            .expect("step");
+        let obs = env.observe();
+        for e in 0..n {
+            assert_eq!(
+                obs.meta[e].cell(9) as u32,
+                at(1 + step, 1),
+                "the route's action is replayed"
+            );
+        }
+        assert_eq!(counts.traversal_steps, u64::from(step) * n as u64);
+    }
+    assert_eq!(
+        agent.worker.rollout.weights,
+        vec![0.0; 3 * n],
+        "traversal steps are no Worker steps"
+    );
+    for c in &ctl.envs {
+        assert!(c.traversal.is_none(), "arrived at g_w");
+        assert!(c.goal.wide_paid);
+        assert!(!c.need_decision, "the Worker goes on towards g_n");
+    }
+    assert_eq!(counts.intervals, 0);
+}
