@@ -484,43 +484,51 @@ pub fn mask(flags: &[bool]) -> Tensor {
     Tensor::from_slice(&v).to_kind(Kind::Float)
 }
 
+/// A random observation batch for tests: any cell code, agents anywhere
+/// facing anywhere, each carrying the key with probability `p_key`.
+#[cfg(test)]
+pub(crate) fn random_obs(
+    rng: &mut rand::rngs::SmallRng,
+    n: usize,
+    w: usize,
+    h: usize,
+    p_key: f64,
+) -> (Vec<u8>, Vec<shm_schemas::EnvMeta>) {
+    use rand::Rng;
+    use shm_schemas::EnvMeta;
+    let cells: Vec<u8> = (0..n * w * h)
+        .map(|_| rng.random_range(0..OBJECT_CHANNELS as u8 + 2))
+        .collect();
+    let meta = (0..n)
+        .map(|_| EnvMeta {
+            x: rng.random_range(0..w as u16),
+            y: rng.random_range(0..h as u16),
+            dir: rng.random_range(0..4),
+            carrying: if rng.random_bool(p_key) {
+                sim::Object::Key as u8
+            } else {
+                EnvMeta::CARRYING_NOTHING
+            },
+            ..EnvMeta::EMPTY
+        })
+        .collect();
+    (cells, meta)
+}
+
 #[cfg(test)]
 mod tests {
     use rand::rngs::SmallRng;
     use rand::{Rng, SeedableRng};
-    use shm_schemas::EnvMeta;
     use tch::{Device, Kind, Tensor};
 
     use super::*;
-
-    /// A random observation batch: any cell code, agent anywhere facing
-    /// anywhere, the key carried or not.
-    fn random_obs(rng: &mut SmallRng, n: usize, w: usize, h: usize) -> (Vec<u8>, Vec<EnvMeta>) {
-        let cells: Vec<u8> = (0..n * w * h)
-            .map(|_| rng.random_range(0..OBJECT_CHANNELS as u8 + 2))
-            .collect();
-        let meta = (0..n)
-            .map(|_| EnvMeta {
-                x: rng.random_range(0..w as u16),
-                y: rng.random_range(0..h as u16),
-                dir: rng.random_range(0..4),
-                carrying: if rng.random_bool(0.5) {
-                    sim::Object::Key as u8
-                } else {
-                    EnvMeta::CARRYING_NOTHING
-                },
-                ..EnvMeta::EMPTY
-            })
-            .collect();
-        (cells, meta)
-    }
 
     #[test]
     fn the_embedding_bag_first_layer_equals_the_dense_convolution() {
         let mut rng = SmallRng::seed_from_u64(5);
         for (w, h, goal_slots) in [(7, 5, 0), (13, 13, 1), (25, 19, 2), (4, 9, 1)] {
             let n = 6;
-            let (cells, meta) = random_obs(&mut rng, n, w, h);
+            let (cells, meta) = random_obs(&mut rng, n, w, h, 0.5);
             let obs = ObsView {
                 seq: 0,
                 cells: &cells,
@@ -604,7 +612,7 @@ mod tests {
     fn appended_batches_equal_one_batch() {
         let mut rng = SmallRng::seed_from_u64(8);
         let (w, h, n) = (6, 5, 4);
-        let (cells, meta) = random_obs(&mut rng, n, w, h);
+        let (cells, meta) = random_obs(&mut rng, n, w, h, 0.5);
         let obs = ObsView {
             seq: 0,
             cells: &cells,

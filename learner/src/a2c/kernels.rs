@@ -644,29 +644,12 @@ mod tests {
 
     #[test]
     fn the_first_convolution_equals_tch_over_the_dense_planes() {
-        use shm_schemas::EnvMeta;
-
-        use crate::a2c::input::{BASE_CHANNELS, GoalMarks, NO_GOAL, OBJECT_CHANNELS};
+        use crate::a2c::input::{BASE_CHANNELS, GoalMarks, NO_GOAL};
         use crate::batch_env::ObsView;
 
         let mut rng = SmallRng::seed_from_u64(4);
         for (w, h, slots, n) in [(13, 13, 0, 4), (25, 19, 2, 3), (5, 4, 1, 6)] {
-            let cells: Vec<u8> = (0..n * w * h)
-                .map(|_| rng.random_range(0..OBJECT_CHANNELS as u8 + 2))
-                .collect();
-            let meta: Vec<EnvMeta> = (0..n)
-                .map(|_| EnvMeta {
-                    x: rng.random_range(0..w as u16),
-                    y: rng.random_range(0..h as u16),
-                    dir: rng.random_range(0..4),
-                    carrying: if rng.random_bool(0.5) {
-                        sim::Object::Key as u8
-                    } else {
-                        EnvMeta::CARRYING_NOTHING
-                    },
-                    ..EnvMeta::EMPTY
-                })
-                .collect();
+            let (cells, meta) = crate::a2c::input::random_obs(&mut rng, n, w, h, 0.5);
             let obs = ObsView {
                 seq: 0,
                 cells: &cells,

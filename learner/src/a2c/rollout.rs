@@ -179,15 +179,7 @@ impl Rollout {
                 let features = encoder.forward(&input).set_requires_grad(true);
                 let out = net.step_features(&features, state);
                 self.leaves.push(features);
-                self.values.extend(floats(&out.value.detach()));
-                PhaseTimes::lap(&mut self.times.act, t1);
-                self.graph_logits.push(out.logits.shallow_clone());
-                self.graph_values.push(out.value.shallow_clone());
-                ActorCriticOutput {
-                    logits: out.logits.detach(),
-                    value: out.value.detach(),
-                    state: out.state,
-                }
+                self.keep_graph(out, t1)
             }
             GradPath::PerStep | GradPath::Plain => {
                 let (x, input) = if self.path == GradPath::Plain {
@@ -203,16 +195,22 @@ impl Rollout {
                     (_, Some(input)) => net.step(input, state),
                     _ => unreachable!("one of the two inputs is built"),
                 };
-                self.values.extend(floats(&out.value.detach()));
-                PhaseTimes::lap(&mut self.times.act, t1);
-                self.graph_logits.push(out.logits.shallow_clone());
-                self.graph_values.push(out.value.shallow_clone());
-                ActorCriticOutput {
-                    logits: out.logits.detach(),
-                    value: out.value.detach(),
-                    state: out.state,
-                }
+                self.keep_graph(out, t1)
             }
+        }
+    }
+
+    /// Keeps the step's graph (its logits and value) for the update and
+    /// returns the step's output detached from it; `t1`: when acting began.
+    fn keep_graph(&mut self, out: ActorCriticOutput, t1: std::time::Instant) -> ActorCriticOutput {
+        self.values.extend(floats(&out.value.detach()));
+        PhaseTimes::lap(&mut self.times.act, t1);
+        self.graph_logits.push(out.logits.shallow_clone());
+        self.graph_values.push(out.value.shallow_clone());
+        ActorCriticOutput {
+            logits: out.logits.detach(),
+            value: out.value.detach(),
+            state: out.state,
         }
     }
 
@@ -613,10 +611,6 @@ mod tests {
 
     #[test]
     fn the_rust_encoder_gives_the_per_step_loss_and_gradients_on_random_inputs() {
-        use shm_schemas::EnvMeta;
-
-        use crate::a2c::input::OBJECT_CHANNELS;
-
         // Random grids (any cell code), agents anywhere facing anywhere,
         // keys carried or not, two goal slots (one sometimes empty or on
         // the agent's cell), random rewards and episode ends.
@@ -629,22 +623,7 @@ mod tests {
             let mut state = net.zero_state(n as i64);
             rollout.start(&state);
             let draw = |rng: &mut SmallRng| {
-                let cells: Vec<u8> = (0..n * w * h)
-                    .map(|_| rng.random_range(0..OBJECT_CHANNELS as u8 + 2))
-                    .collect();
-                let meta: Vec<EnvMeta> = (0..n)
-                    .map(|_| EnvMeta {
-                        x: rng.random_range(0..w as u16),
-                        y: rng.random_range(0..h as u16),
-                        dir: rng.random_range(0..4),
-                        carrying: if rng.random_bool(0.3) {
-                            sim::Object::Key as u8
-                        } else {
-                            EnvMeta::CARRYING_NOTHING
-                        },
-                        ..EnvMeta::EMPTY
-                    })
-                    .collect();
+                let (cells, meta) = crate::a2c::input::random_obs(rng, n, w, h, 0.3);
                 let goals: Vec<u32> = (0..2 * n)
                     .map(|k| match rng.random_range(0..4) {
                         0 => crate::a2c::input::NO_GOAL,
