@@ -68,6 +68,16 @@ fn read_log(path: &Path) -> BTreeMap<u64, ProcLog> {
         }
         p.checkpoints += u64::from(v["checkpointed"].as_bool() == Some(true));
     }
+    // A learner killed after committing a checkpoint but before logging
+    // that iteration reached it all the same: the next learner (started
+    // after it; learners run one at a time) resumes from that checkpoint.
+    let mut by_start: Vec<&mut ProcLog> = procs.values_mut().collect();
+    by_start.sort_by_key(|p| p.start_ms);
+    for i in 1..by_start.len() {
+        let resumed = by_start[i].resumed_from;
+        let killed = &mut by_start[i - 1];
+        killed.last_iteration = killed.last_iteration.max(resumed);
+    }
     procs
 }
 
@@ -168,5 +178,42 @@ pub fn analyse(
             .get(gaps.len() / 2)
             .map_or(f64::NAN, |&g| g as f64 / 1000.0),
         final_checkpoint_error,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(pid: u64, ms: u64, event: &str, iteration: u64, checkpointed: bool) -> String {
+        serde_json::json!({
+            "pid": pid, "unix_ms": ms, "event": event, "iteration": iteration,
+            "checkpointed": checkpointed,
+        })
+        .to_string()
+    }
+
+    #[test]
+    fn a_learner_killed_between_its_checkpoint_and_its_log_line_ran_to_the_checkpoint() {
+        // Learner 1 logs iterations 1–9 (checkpoint every 5) and is killed
+        // after committing iteration 10's checkpoint, before its log line;
+        // learner 2 resumes from 10 and runs to 14.
+        let mut log: Vec<String> = vec![line(1, 0, "start", 0, false)];
+        log.extend((1..10).map(|i| line(1, i, "iteration", i, i % 5 == 0)));
+        log.push(line(2, 100, "start", 10, false));
+        log.extend((11..15).map(|i| line(2, 100 + i, "iteration", i, false)));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("log.jsonl");
+        std::fs::write(&path, log.join("\n")).unwrap();
+        let procs = read_log(&path);
+        let run: u64 = procs
+            .values()
+            .map(|p| p.last_iteration - p.resumed_from)
+            .sum();
+        assert_eq!(procs[&1].last_iteration, 10);
+        assert_eq!(
+            run, 14,
+            "every iteration the final checkpoint holds was run"
+        );
     }
 }
