@@ -515,6 +515,25 @@ pub(crate) fn random_obs(
     (cells, meta)
 }
 
+/// The observation view of a test batch: `cells` and `meta` of
+/// `meta.len()` environments on a `w × h` grid, no final states.
+#[cfg(test)]
+pub(crate) fn test_view<'a>(
+    cells: &'a [u8],
+    meta: &'a [shm_schemas::EnvMeta],
+    w: usize,
+    h: usize,
+) -> ObsView<'a> {
+    ObsView {
+        seq: 0,
+        cells,
+        final_cells: &[],
+        meta,
+        width: w,
+        height: h,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use rand::rngs::SmallRng;
@@ -529,14 +548,7 @@ mod tests {
         for (w, h, goal_slots) in [(7, 5, 0), (13, 13, 1), (25, 19, 2), (4, 9, 1)] {
             let n = 6;
             let (cells, meta) = random_obs(&mut rng, n, w, h, 0.5);
-            let obs = ObsView {
-                seq: 0,
-                cells: &cells,
-                final_cells: &[],
-                meta: &meta,
-                width: w,
-                height: h,
-            };
+            let obs = test_view(&cells, &meta, w, h);
             let goal_cells: Vec<u32> = (0..n * goal_slots)
                 .map(|k| {
                     if k % 3 == 2 {
@@ -613,14 +625,7 @@ mod tests {
         let mut rng = SmallRng::seed_from_u64(8);
         let (w, h, n) = (6, 5, 4);
         let (cells, meta) = random_obs(&mut rng, n, w, h, 0.5);
-        let obs = ObsView {
-            seq: 0,
-            cells: &cells,
-            final_cells: &[],
-            meta: &meta,
-            width: w,
-            height: h,
-        };
+        let obs = test_view(&cells, &meta, w, h);
         let mut whole = CellInput::new(w, h, 0);
         whole.push_obs(&obs, None);
         let mut parts = CellInput::new(w, h, 0);

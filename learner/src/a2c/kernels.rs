@@ -645,19 +645,11 @@ mod tests {
     #[test]
     fn the_first_convolution_equals_tch_over_the_dense_planes() {
         use crate::a2c::input::{BASE_CHANNELS, GoalMarks, NO_GOAL};
-        use crate::batch_env::ObsView;
 
         let mut rng = SmallRng::seed_from_u64(4);
         for (w, h, slots, n) in [(13, 13, 0, 4), (25, 19, 2, 3), (5, 4, 1, 6)] {
             let (cells, meta) = crate::a2c::input::random_obs(&mut rng, n, w, h, 0.5);
-            let obs = ObsView {
-                seq: 0,
-                cells: &cells,
-                final_cells: &[],
-                meta: &meta,
-                width: w,
-                height: h,
-            };
+            let obs = crate::a2c::input::test_view(&cells, &meta, w, h);
             // Goal cells anywhere, one slot in three empty, and (with two
             // slots) some on the agent's cell or on each other.
             let goal_cells: Vec<u32> = (0..n * slots)

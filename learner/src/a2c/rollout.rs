@@ -470,23 +470,9 @@ mod tests {
                 layout.height,
             )
         });
-        let cfg = A2cConfig::default();
         let grads = |path| {
             let rollout = fill(path, &net, &layout, 12, 9);
-            for v in vs.trainable_variables() {
-                if v.grad().defined() {
-                    let _ = v.grad().zero_();
-                }
-            }
-            let (loss, figures) = rollout.loss(&net, &cfg);
-            loss.backward();
-            let mut named: Vec<(String, Tensor)> = vs
-                .variables()
-                .into_iter()
-                .map(|(k, v)| (k, v.grad().copy()))
-                .collect();
-            named.sort_by(|a, b| a.0.cmp(&b.0));
-            (loss.double_value(&[]), figures, named)
+            loss_and_gradients(&rollout, &net, &vs)
         };
         let (loss_fast, fig_fast, g_fast) = grads(GradPath::Recompute);
         let (loss_plain, fig_plain, g_plain) = grads(GradPath::Plain);
@@ -635,14 +621,7 @@ mod tests {
             };
             for _ in 0..steps {
                 let (cells, meta, goals) = draw(&mut rng);
-                let obs = ObsView {
-                    seq: 0,
-                    cells: &cells,
-                    final_cells: &[],
-                    meta: &meta,
-                    width: w,
-                    height: h,
-                };
+                let obs = crate::a2c::input::test_view(&cells, &meta, w, h);
                 let marks = GoalMarks {
                     cells: &goals,
                     per_env: 2,
