@@ -440,14 +440,12 @@ pub(super) mod tests {
             ..EnvMeta::EMPTY
         }];
         let cells = vec![0u8; layout.cells.len()];
-        f(&ObsView {
-            seq: 0,
-            cells: &cells,
-            final_cells: &[],
-            meta: &meta,
-            width: layout.width,
-            height: layout.height,
-        })
+        f(&crate::a2c::input::test_view(
+            &cells,
+            &meta,
+            layout.width,
+            layout.height,
+        ))
     }
 
     /// Books a forward step after which the agent stands on `cell`.

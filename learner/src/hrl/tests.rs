@@ -100,14 +100,7 @@ fn the_wide_narrow_worker_sees_which_goal_is_which() {
     assert_eq!(marks, vec![5, 9, 9, 5]);
     let layout = sim::Maze::Small.layout(false);
     let (cells, meta) = (layout.cells.repeat(2), vec![EnvMeta::EMPTY; 2]);
-    let obs = ObsView {
-        seq: 0,
-        cells: &cells,
-        final_cells: &[],
-        meta: &meta,
-        width: layout.width,
-        height: layout.height,
-    };
+    let obs = crate::a2c::input::test_view(&cells, &meta, layout.width, layout.height);
     let dense = crate::a2c::input::encode_obs(
         &obs,
         Some(GoalMarks {
