@@ -15,6 +15,7 @@ use clap::{Parser, Subcommand};
 
 mod chart;
 mod commands;
+mod episode_picture;
 mod latency;
 mod output;
 mod pipeline;

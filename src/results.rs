@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
-use crate::commands::train::TrainConfig;
+use learner::run::config::TrainConfig;
 
 /// Version of the summary format.
 pub const RESULT_SCHEMA: u32 = 1;

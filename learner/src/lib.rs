@@ -20,6 +20,7 @@ pub mod experience;
 pub mod gcp;
 pub mod hrl;
 pub mod policy;
+pub mod run;
 pub mod seeding;
 pub mod vae;
 

@@ -53,6 +53,17 @@ impl Task {
         }
     }
 
+    /// The paper's name: `MultiGoal`, `MultiGoal-Sparse`,
+    /// `MultiGoal-Stochastic`, `Door-Key`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Task::MultiGoal => "MultiGoal",
+            Task::MultiGoalSparse => "MultiGoal-Sparse",
+            Task::MultiGoalStochastic => "MultiGoal-Stochastic",
+            Task::DoorKey => "Door-Key",
+        }
+    }
+
     /// True for the three ball-collecting tasks.
     pub fn is_multigoal(self) -> bool {
         !matches!(self, Task::DoorKey)

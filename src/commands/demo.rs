@@ -10,7 +10,9 @@ use clap::Args;
 use sim::{Maze, Task};
 
 use super::discover::DiscoverArgs;
-use super::train::{AgentArg, CandidatesArg, InitArg, TestSummary, TrainArgs};
+use learner::run::protocol::TestSummary;
+
+use super::train::{AgentArg, CandidatesArg, InitArg, TrainArgs};
 
 /// `demo` options.
 #[derive(Debug, Args)]

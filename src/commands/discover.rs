@@ -9,6 +9,8 @@ use anyhow::Context;
 use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
+use learner::run::artefact::DiscoveryIdentity;
+use learner::run::dir;
 use serde::Serialize;
 use sim::render::{Canvas, Rgb, draw_grid, object_color};
 use sim::{Layout, Maze, Object, Task};
@@ -155,7 +157,7 @@ fn world(a: &DiscoverArgs, seed: u64) -> WorldArgs {
 
 /// The most environments a batch may have: the pipeline's limit, which
 /// `train` and `discover` keep in process too.
-pub const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
+const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
 
 /// Reads a TOML discovery config (unknown keys refused).
 pub fn read_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
@@ -168,160 +170,6 @@ pub fn read_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
             e.to_string().trim_end()
         )
     })
-}
-
-/// What a run directory was started with (`<run>/config.toml`): the
-/// layout (name, size, FNV-1a digest of its cells) and the resolved
-/// settings with their digest. A resumed run must match it, budget aside.
-#[derive(Debug, Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RunIdentity {
-    layout: String,
-    layout_size: String,
-    layout_digest: String,
-    envs: usize,
-    config_digest: String,
-    discovery: DiscoveryConfig,
-}
-
-fn fnv1a(bytes: &[u8]) -> String {
-    let h = bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    });
-    format!("{h:016x}")
-}
-
-/// Whether `text` is a discover run's `config.toml` (its identity).
-pub fn is_run_identity(text: &str) -> bool {
-    toml::from_str::<RunIdentity>(text).is_ok()
-}
-
-/// The layout a discover run was made on, as it recorded it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct RecordedLayout {
-    /// The layout's name (`small`, or a layout file's name).
-    pub name: String,
-    /// Width in cells.
-    pub width: usize,
-    /// Height in cells.
-    pub height: usize,
-}
-
-/// The layout of the discover run in `dir`: from its identity
-/// (`config.toml`), else from its world graph (`graph.json`).
-pub fn recorded_layout(dir: &Path) -> Option<RecordedLayout> {
-    if let Some(id) = std::fs::read_to_string(dir.join("config.toml"))
-        .ok()
-        .and_then(|t| toml::from_str::<RunIdentity>(&t).ok())
-    {
-        let (w, h) = id.layout_size.split_once('x')?;
-        return Some(RecordedLayout {
-            name: id.layout,
-            width: w.parse().ok()?,
-            height: h.parse().ok()?,
-        });
-    }
-    let graph = planner::WorldGraph::load(&dir.join("graph.json")).ok()?;
-    let l = graph.layout();
-    Some(RecordedLayout {
-        name: l.name.clone(),
-        width: l.width,
-        height: l.height,
-    })
-}
-
-/// Refuses the world graph of the discover run `dir` for a run on `maze`
-/// (whose layout is `layout`) when it was discovered on a layout of
-/// another size: its `π_g` and graph do not fit. Warns when the size is
-/// the same but the layout's name differs. Says nothing when the run
-/// recorded no layout.
-pub fn check_world_graph_layout(dir: &Path, maze: Maze, layout: &Layout) -> anyhow::Result<()> {
-    let Some(l) = recorded_layout(dir) else {
-        return Ok(());
-    };
-    if (l.width, l.height) != (layout.width, layout.height) {
-        anyhow::bail!(
-            "the world graph {} is from maze {} ({}x{}), this run is {} ({}x{}): discover on \
-             --maze {} or train on the maze of the world graph",
-            dir.display(),
-            l.name,
-            l.width,
-            l.height,
-            maze.name(),
-            layout.width,
-            layout.height,
-            maze.name()
-        );
-    }
-    if l.name != maze.name() && l.name != layout.name {
-        eprintln!(
-            "warning: the world graph {} is from layout {}, this run is maze {} (of the same size)",
-            dir.display(),
-            l.name,
-            maze.name()
-        );
-    }
-    Ok(())
-}
-
-impl RunIdentity {
-    fn new(layout: &Layout, envs: usize, cfg: &DiscoveryConfig) -> RunIdentity {
-        let mut identity = cfg.clone();
-        // The budget may grow on a resumed run: not part of the digest.
-        identity.max_rounds = 0;
-        identity.patience = 0;
-        RunIdentity {
-            layout: layout.name.clone(),
-            layout_size: format!("{}x{}", layout.width, layout.height),
-            layout_digest: fnv1a(layout.to_text().as_bytes()),
-            envs,
-            config_digest: fnv1a(toml::to_string(&identity).unwrap_or_default().as_bytes()),
-            discovery: cfg.clone(),
-        }
-    }
-
-    /// Refuses a run directory started with another layout or settings
-    /// (naming what differs), then records this identity.
-    fn check_and_record(&self, dir: &Path) -> anyhow::Result<()> {
-        let path = dir.join("config.toml");
-        if let Ok(text) = std::fs::read_to_string(&path) {
-            let old: RunIdentity = toml::from_str(&text)
-                .with_context(|| format!("{} is not a run identity", path.display()))?;
-            let refuse = |what: String| {
-                anyhow::anyhow!(
-                    "{} was started with {what}; use another --run directory or the same settings",
-                    dir.display()
-                )
-            };
-            if old.layout != self.layout || old.layout_size != self.layout_size {
-                return Err(refuse(format!(
-                    "layout {} ({}), this run uses {} ({})",
-                    old.layout, old.layout_size, self.layout, self.layout_size
-                )));
-            }
-            if old.layout_digest != self.layout_digest {
-                return Err(refuse(format!(
-                    "another version of layout {} (cells digest {}, now {}): the file was edited",
-                    self.layout, old.layout_digest, self.layout_digest
-                )));
-            }
-            if old.envs != self.envs {
-                return Err(refuse(format!(
-                    "--envs {}, this run uses {}",
-                    old.envs, self.envs
-                )));
-            }
-            if let Some(diff) =
-                learner::discovery::config_difference(&old.discovery, &self.discovery)
-            {
-                return Err(refuse(diff.replace("in the checkpoint", "there")));
-            }
-        }
-        let text = toml::to_string(self).context("cannot write the run identity as TOML")?;
-        sim::render::write_atomic(&path, text.as_bytes())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        Ok(())
-    }
 }
 
 /// Runs `worldgraph discover`.
@@ -357,12 +205,14 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let own: Vec<String> = a
         .config
         .as_deref()
-        .and_then(|c| super::run_dir::name_in(&dir, c))
+        .and_then(|c| dir::name_in(&dir, c))
         .into_iter()
+        .chain(["lock".to_string()])
         .collect();
-    super::run_dir::check("--run", &dir, super::run_dir::RunKind::Discover, &own)?;
+    dir::check("--run", &dir, dir::RunKind::Discover, &own)?;
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    RunIdentity::new(&layout, a.envs, &cfg).check_and_record(&dir)?;
+    let _lock = dir::lock(&dir, "discover")?;
+    DiscoveryIdentity::new(&layout, a.envs, &cfg).check_and_record(&dir)?;
     let num_actions = env_cfg.task.num_actions();
     let mut disc = Discovery::new(cfg, &layout, a.envs, num_actions)?;
     let ckpt = dir.join("checkpoint");

@@ -10,7 +10,6 @@ pub mod demo;
 pub mod discover;
 pub mod experiment;
 pub mod run;
-pub mod run_dir;
 pub mod sim;
 pub mod soak;
 pub mod soak_report;

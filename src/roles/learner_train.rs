@@ -96,22 +96,22 @@ impl TrainState {
         }
     }
 
-    /// The first field in which a checkpoint's state differs from this run.
+    /// The first field in which a checkpoint's state differs from this
+    /// run (its progress aside): `maze is "small" in the checkpoint,
+    /// "medium" now`.
     fn difference(&self, now: &TrainState) -> Option<String> {
-        let differs = |what: &str, old: String, new: String| {
-            (old != new).then(|| format!("{what} is {old} in the checkpoint, {new} now"))
-        };
-        differs("maze", self.maze.clone(), now.maze.clone())
-            .or_else(|| {
-                differs(
-                    "grid",
-                    format!("{:?}", self.grid),
-                    format!("{:?}", now.grid),
-                )
+        learner::run::identity::differences(self, now, &["iterations", "env_steps"])
+            .into_iter()
+            .next()
+            .map(|d| {
+                // The settings a user gives as flags are named as flags.
+                let name = match d.path.as_str() {
+                    "envs" | "task" => format!("--{}", d.path),
+                    p if p.starts_with("gcp.") => format!("π_g's {}", &p[4..]),
+                    p => p.to_string(),
+                };
+                format!("{name} is {} in the checkpoint, {} now", d.saved, d.now)
             })
-            .or_else(|| differs("--envs", self.envs.to_string(), now.envs.to_string()))
-            .or_else(|| differs("--task", self.task.clone(), now.task.clone()))
-            .or_else(|| (self.gcp != now.gcp).then(|| "π_g's configuration differs".to_string()))
     }
 }
 

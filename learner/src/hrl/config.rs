@@ -45,6 +45,27 @@ pub enum Candidates {
     Pivotal,
 }
 
+impl Candidates {
+    /// The paper's symbol: `V_all`, `V_rand`, `V_p`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Candidates::All => "V_all",
+            Candidates::Random => "V_rand",
+            Candidates::Pivotal => "V_p",
+        }
+    }
+
+    /// The name in configuration names and on the command line: `all`,
+    /// `random`, `pivotal`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Candidates::All => "all",
+            Candidates::Random => "random",
+            Candidates::Pivotal => "pivotal",
+        }
+    }
+}
+
 /// What handing over to a world-graph traversal pays the Worker (section
 /// 4.3 leaves it open: the traversal starts on "a pivotal state with a
 /// route to `g_w`", wherever the Worker met it).
@@ -213,25 +234,96 @@ impl AgentConfig {
         self.kind == AgentKind::WideNarrow && self.candidates != Candidates::All
     }
 
+    /// Whether a run of this agent on `task` needs a discovery run: its
+    /// world graph (WN over `V_rand` or `V_p`), its `π_g` (initialisation,
+    /// or steering traversal in a stochastic world, section 4.3).
+    pub fn needs_discovery(&self, task: Task) -> bool {
+        self.needs_graph()
+            || self.init_from_gcp
+            || (self.traversal && task == Task::MultiGoalStochastic)
+    }
+
     /// A short name: `a2c`, `fn`, `fn-init`, `wn-pivotal-trav-init`, ...
     pub fn name(&self) -> String {
         let mut s = match self.kind {
             AgentKind::A2c => "a2c".to_string(),
             AgentKind::Feudal => "fn".to_string(),
-            AgentKind::WideNarrow => format!(
-                "wn-{}",
-                match self.candidates {
-                    Candidates::All => "all",
-                    Candidates::Random => "random",
-                    Candidates::Pivotal => "pivotal",
-                }
-            ),
+            AgentKind::WideNarrow => format!("wn-{}", self.candidates.name()),
         };
         if self.traversal {
             s.push_str("-trav");
         }
         if self.init_from_gcp {
             s.push_str("-init");
+        }
+        s
+    }
+
+    /// `base` with the agent settings a short name stands for (the inverse
+    /// of [`Self::name`]); refused when the name is unknown or not a valid
+    /// combination (`a2c-trav`, `wn-all-init` runs as another name).
+    pub fn from_name(name: &str, base: &AgentConfig) -> Result<AgentConfig, ConfigError> {
+        let mut rest = name;
+        let mut strip = |suffix: &str| match rest.strip_suffix(suffix) {
+            Some(r) => {
+                rest = r;
+                true
+            }
+            None => false,
+        };
+        let init_from_gcp = strip("-init");
+        let traversal = strip("-trav");
+        let (kind, candidates) = match rest {
+            "a2c" => (AgentKind::A2c, Candidates::All),
+            "fn" => (AgentKind::Feudal, Candidates::All),
+            "wn-all" => (AgentKind::WideNarrow, Candidates::All),
+            "wn-random" => (AgentKind::WideNarrow, Candidates::Random),
+            "wn-pivotal" => (AgentKind::WideNarrow, Candidates::Pivotal),
+            _ => {
+                return Err(ConfigError::new(
+                    "configuration",
+                    format!(
+                        "unknown configuration {name:?}: expected a2c, fn, fn-init or \
+                         wn-<all|random|pivotal>[-trav][-init]"
+                    ),
+                ));
+            }
+        };
+        let cfg = AgentConfig {
+            kind,
+            candidates,
+            traversal,
+            init_from_gcp,
+            ..base.clone()
+        };
+        cfg.validate().map_err(|e| {
+            ConfigError::new("configuration", format!("configuration {name:?}: {e}"))
+        })?;
+        if cfg.name() != name {
+            return Err(ConfigError::new(
+                "configuration",
+                format!(
+                    "configuration {name:?} is not a valid combination (it would run as {:?})",
+                    cfg.name()
+                ),
+            ));
+        }
+        Ok(cfg)
+    }
+
+    /// The paper's name: `A2C`, `FN + π_g init`,
+    /// `WN V_p + traversal + π_g init`, ...
+    pub fn label(&self) -> String {
+        let mut s = match self.kind {
+            AgentKind::A2c => "A2C".to_string(),
+            AgentKind::Feudal => "FN".to_string(),
+            AgentKind::WideNarrow => format!("WN {}", self.candidates.label()),
+        };
+        if self.traversal {
+            s.push_str(" + traversal");
+        }
+        if self.init_from_gcp {
+            s.push_str(" + π_g init");
         }
         s
     }

@@ -20,318 +20,20 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use learner::hrl::{AgentConfig, AgentKind, Candidates};
-use serde::{Deserialize, Serialize};
 use sim::render::write_atomic;
 use sim::{Maze, Task};
 
-use super::train::{TestSummary, TrainConfig};
+use learner::run::config::TrainConfig;
+use learner::run::protocol::TestSummary;
+mod grid;
+mod reproduce;
+
+pub use self::grid::Grid;
+use self::grid::{Group, config_named, train_args};
 use crate::results::{
     CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, build_commit,
     discover_path, read_run, run_path,
 };
-
-/// A grid file (`experiments/*.toml`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Grid {
-    /// Name; the runs' working files go to `runs/experiments/<name>/`.
-    pub name: String,
-    /// Training seeds of every cell (the paper: 3).
-    pub seeds: Vec<u64>,
-    /// Validation seeds of each run (the paper: 10).
-    #[serde(default = "default_validation_seeds")]
-    pub validation_seeds: usize,
-    /// Test seeds of each run (the paper: 100).
-    #[serde(default = "default_test_seeds")]
-    pub test_seeds: usize,
-    /// Budgets, one per maze of the grid.
-    pub maze: Vec<MazeBudget>,
-    /// The discovery settings of the grid's world graphs: a TOML file of
-    /// `DiscoveryConfig` (`discover --config`), relative to the directory
-    /// the command runs in (the repository). `None`: the current defaults.
-    /// A summary names its grid, so reproducing it reads this too: pinning
-    /// it keeps committed results reproducible when the defaults move on.
-    #[serde(default)]
-    pub discover_config: Option<PathBuf>,
-    /// Cells: tasks × configurations (× the grid's mazes and seeds).
-    pub group: Vec<Group>,
-}
-
-fn default_validation_seeds() -> usize {
-    10
-}
-
-fn default_test_seeds() -> usize {
-    100
-}
-
-/// One maze's budget.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MazeBudget {
-    /// The embedded maze.
-    pub name: Maze,
-    /// Env steps of each training run.
-    pub env_steps: u64,
-    /// Env steps between validations (and checkpoints).
-    pub eval_every: u64,
-    /// Rounds of the maze's world graph discovery (one per training seed).
-    pub discover_rounds: u32,
-}
-
-/// A block of cells: every task with every configuration.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Group {
-    /// The paper's table the cells fill (1: the MultiGoal tasks, 2: Door-Key).
-    pub table: u8,
-    /// Tasks, by their command-line names (`multigoal`, `multigoal-sparse`,
-    /// `multigoal-stochastic`, `doorkey`).
-    #[serde(with = "task_names")]
-    pub tasks: Vec<Task>,
-    /// Agent configurations by name: `a2c`, `fn`, `fn-init`, or
-    /// `wn-<all|random|pivotal>[-trav][-init]`.
-    pub configs: Vec<String>,
-    /// Mazes of the group [default: every maze of the grid].
-    #[serde(default)]
-    pub mazes: Vec<Maze>,
-}
-
-/// Tasks by their command-line names in grid files.
-mod task_names {
-    use serde::{Deserialize, Deserializer, Serializer};
-    use sim::Task;
-
-    pub fn serialize<S: Serializer>(tasks: &[Task], s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(tasks.iter().map(|t| t.name()))
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Task>, D::Error> {
-        Vec::<String>::deserialize(d)?
-            .iter()
-            .map(|n| n.parse::<Task>().map_err(serde::de::Error::custom))
-            .collect()
-    }
-}
-
-/// The agent settings a configuration name stands for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ConfigName {
-    /// Agent kind.
-    pub kind: AgentKind,
-    /// WN's wide-goal candidates.
-    pub candidates: Candidates,
-    /// World graph traversal.
-    pub traversal: bool,
-    /// `π_g` initialisation.
-    pub init: bool,
-}
-
-impl ConfigName {
-    /// Parses a configuration name (the inverse of [`AgentConfig::name`]).
-    pub fn parse(name: &str) -> anyhow::Result<ConfigName> {
-        let mut rest = name;
-        let init = match rest.strip_suffix("-init") {
-            Some(r) => {
-                rest = r;
-                true
-            }
-            None => false,
-        };
-        let traversal = match rest.strip_suffix("-trav") {
-            Some(r) => {
-                rest = r;
-                true
-            }
-            None => false,
-        };
-        let (kind, candidates) = match rest {
-            "a2c" => (AgentKind::A2c, Candidates::All),
-            "fn" => (AgentKind::Feudal, Candidates::All),
-            "wn-all" => (AgentKind::WideNarrow, Candidates::All),
-            "wn-random" => (AgentKind::WideNarrow, Candidates::Random),
-            "wn-pivotal" => (AgentKind::WideNarrow, Candidates::Pivotal),
-            _ => bail!(
-                "unknown configuration {name:?}: expected a2c, fn, fn-init or wn-<all|random|pivotal>[-trav][-init]"
-            ),
-        };
-        let c = ConfigName {
-            kind,
-            candidates,
-            traversal,
-            init,
-        };
-        let cfg = c.apply(&AgentConfig::default());
-        cfg.validate()
-            .with_context(|| format!("configuration {name:?}"))?;
-        anyhow::ensure!(
-            cfg.name() == name,
-            "configuration {name:?} is not a valid combination (it would run as {:?})",
-            cfg.name()
-        );
-        Ok(c)
-    }
-
-    /// `base` with these settings.
-    pub fn apply(&self, base: &AgentConfig) -> AgentConfig {
-        AgentConfig {
-            kind: self.kind,
-            candidates: self.candidates,
-            traversal: self.traversal,
-            init_from_gcp: self.init,
-            ..base.clone()
-        }
-    }
-
-    /// Whether the configuration needs a discovery run (its graph or `π_g`).
-    pub fn needs_discovery(&self, task: Task) -> bool {
-        let cfg = self.apply(&AgentConfig::default());
-        cfg.needs_graph() || self.init || (self.traversal && task == Task::MultiGoalStochastic)
-    }
-
-    /// The `train` arguments that select it.
-    fn train_args(&self) -> Vec<String> {
-        let mut v = vec![
-            "--agent".to_string(),
-            match self.kind {
-                AgentKind::A2c => "a2c",
-                AgentKind::Feudal => "fn",
-                AgentKind::WideNarrow => "wn",
-            }
-            .to_string(),
-            "--candidates".to_string(),
-            match self.candidates {
-                Candidates::All => "all",
-                Candidates::Random => "random",
-                Candidates::Pivotal => "pivotal",
-            }
-            .to_string(),
-            "--init".to_string(),
-            if self.init { "pi-g" } else { "none" }.to_string(),
-        ];
-        if self.traversal {
-            v.push("--traversal".to_string());
-        }
-        v
-    }
-}
-
-impl Grid {
-    /// Reads and checks a grid file.
-    pub fn read(path: &Path) -> anyhow::Result<Grid> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let g: Grid = toml::from_str(&text)
-            .with_context(|| format!("{} is not a valid experiment grid", path.display()))?;
-        g.check()
-            .with_context(|| format!("{} is not a valid experiment grid", path.display()))?;
-        Ok(g)
-    }
-
-    fn check(&self) -> anyhow::Result<()> {
-        anyhow::ensure!(
-            !self.name.is_empty()
-                && self
-                    .name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_'),
-            "name {:?} must be letters, digits, '-' or '_'",
-            self.name
-        );
-        anyhow::ensure!(!self.seeds.is_empty(), "seeds: at least one training seed");
-        for (i, &s) in self.seeds.iter().enumerate() {
-            anyhow::ensure!(
-                s < super::train::MAX_TRAIN_SEED,
-                "seeds: {s} is not below {}",
-                super::train::MAX_TRAIN_SEED
-            );
-            // Two runs of one seed would share a run directory and a summary.
-            anyhow::ensure!(
-                !self.seeds[..i].contains(&s),
-                "seeds: {s} is listed twice (each training seed once)"
-            );
-        }
-        anyhow::ensure!(
-            self.validation_seeds > 0 && self.test_seeds > 0,
-            "validation_seeds and test_seeds must be at least 1"
-        );
-        let max = super::train::MAX_EVAL_SEEDS;
-        for (name, n) in [
-            ("validation_seeds", self.validation_seeds),
-            ("test_seeds", self.test_seeds),
-        ] {
-            anyhow::ensure!(n as u64 <= max, "{name} = {n}: at most {max} seeds");
-        }
-        anyhow::ensure!(!self.maze.is_empty(), "[[maze]]: at least one maze");
-        if let Some(c) = &self.discover_config {
-            anyhow::ensure!(
-                c.is_file(),
-                "discover_config: {} is not a file (paths are relative to the directory the command runs in)",
-                c.display()
-            );
-            // The discoveries would refuse it one by one: refused here,
-            // `--dry-run` included.
-            super::discover::read_config(c)
-                .and_then(|cfg| {
-                    cfg.validate()
-                        .with_context(|| format!("{} is not a valid discovery config", c.display()))
-                })
-                .context("discover_config")?;
-        }
-        for (i, m) in self.maze.iter().enumerate() {
-            anyhow::ensure!(
-                m.env_steps > 0 && m.eval_every > 0 && m.discover_rounds > 0,
-                "maze {}: env_steps, eval_every and discover_rounds must be at least 1",
-                m.name.name()
-            );
-            anyhow::ensure!(
-                !self.maze[..i].iter().any(|o| o.name == m.name),
-                "maze {} is listed twice",
-                m.name.name()
-            );
-        }
-        for g in &self.group {
-            anyhow::ensure!(
-                g.table == 1 || g.table == 2,
-                "group table {} (1 or 2)",
-                g.table
-            );
-            anyhow::ensure!(
-                !g.tasks.is_empty() && !g.configs.is_empty(),
-                "a group needs tasks and configs"
-            );
-            for c in &g.configs {
-                ConfigName::parse(c)?;
-            }
-            for m in &g.mazes {
-                anyhow::ensure!(
-                    self.budget(*m).is_some(),
-                    "group maze {} has no [[maze]] budget",
-                    m.name()
-                );
-            }
-        }
-        Ok(())
-    }
-
-    /// The budget of `maze`.
-    pub fn budget(&self, maze: Maze) -> Option<&MazeBudget> {
-        self.maze.iter().find(|m| m.name == maze)
-    }
-
-    /// The training configuration of a run on `maze`.
-    pub fn train_config(&self, maze: Maze) -> TrainConfig {
-        let b = self.budget(maze).expect("checked maze");
-        TrainConfig {
-            env_steps: b.env_steps,
-            eval_every: b.eval_every,
-            validation_seeds: self.validation_seeds,
-            test_seeds: self.test_seeds,
-            ..TrainConfig::default()
-        }
-    }
-}
 
 /// `experiment` options.
 #[derive(Debug, Clone, Args)]
@@ -469,7 +171,7 @@ fn train_command(
     write_atomic(&cfg_file, toml::to_string(cfg)?.as_bytes())?;
     let mut cmd = crate::pipeline::worldgraph_command()?;
     cmd.args(["train", "--maze", maze.name(), "--task", task.name()])
-        .args(ConfigName::parse(config)?.train_args())
+        .args(train_args(config)?)
         .arg("--seed")
         .arg(seed.to_string())
         .arg("--config")
@@ -638,7 +340,7 @@ fn write_result(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 /// grid leaves whole cells).
 fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
     for c in &a.configs {
-        ConfigName::parse(c)?;
+        config_named(c)?;
     }
     let keep_maze = |m: Maze| a.mazes.is_empty() || a.mazes.contains(&m);
     let keep_seed = |s: u64| a.seeds.is_empty() || a.seeds.contains(&s);
@@ -662,7 +364,7 @@ fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
                     .iter()
                     .filter(|c| a.configs.is_empty() || a.configs.contains(c))
                 {
-                    let needs_graph = ConfigName::parse(config)?.needs_discovery(task);
+                    let needs_graph = config_named(config)?.needs_discovery(task);
                     for &seed in grid.seeds.iter().filter(|&&s| keep_seed(s)) {
                         let needs = needs_graph.then(|| {
                             *discover.entry((maze, seed)).or_insert_with(|| {
@@ -745,7 +447,7 @@ fn unmatched_filters(grid: &Grid, a: &ExperimentArgs) -> Vec<String> {
 /// Runs `worldgraph experiment`.
 pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(summary) = &a.reproduce {
-        return reproduce(summary, &a);
+        return reproduce::reproduce(summary, &a);
     }
     let grid_path = a.grid.clone().expect("clap: grid or --reproduce");
     let grid = Grid::read(&grid_path)?;
@@ -1056,140 +758,4 @@ fn score_note(plan: &Plan, job: &Job) -> String {
         .unwrap_or_default(),
         Job::Discover { .. } => String::new(),
     }
-}
-
-/// `--reproduce`: reruns one recorded run in a scratch working directory.
-fn reproduce(summary: &Path, a: &ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
-    let r = read_run(summary)?;
-    let maze: Maze = r
-        .maze
-        .parse()
-        .map_err(|e| anyhow::anyhow!("{}: maze {:?}: {e}", summary.display(), r.maze))?;
-    let task: Task = r
-        .task
-        .parse()
-        .map_err(|e| anyhow::anyhow!("{}: task {:?}: {e}", summary.display(), r.task))?;
-    let work = a.work.clone().unwrap_or_else(|| {
-        PathBuf::from("runs/reproduce").join(format!(
-            "{}-{}-{}-seed-{}",
-            r.maze, r.task, r.config, r.seed
-        ))
-    });
-    let grid = Grid {
-        name: "reproduce".to_string(),
-        seeds: vec![r.seed],
-        validation_seeds: r.validation_seeds,
-        test_seeds: r.test_seeds,
-        maze: vec![MazeBudget {
-            name: maze,
-            env_steps: r.train_config.env_steps,
-            eval_every: r.train_config.eval_every,
-            discover_rounds: r.discover.as_ref().map_or(1, |d| d.rounds),
-        }],
-        // The discovery settings the summary's grid pins, if it does.
-        discover_config: match &r.discover {
-            Some(_) => {
-                Grid::read(Path::new(&r.grid))
-                    .with_context(|| {
-                        format!(
-                            "{} names grid {}, whose discover_config the world graph needs",
-                            summary.display(),
-                            r.grid
-                        )
-                    })?
-                    .discover_config
-            }
-            None => None,
-        },
-        group: Vec::new(),
-    };
-    let plan = Plan {
-        grid,
-        grid_label: r.grid.clone(),
-        work: work.clone(),
-        results: work.join("results"),
-        threads: r.torch_threads,
-        jobs: 1,
-        commit: build_commit(),
-    };
-    let graph = match &r.discover {
-        Some(spec) => {
-            let dir = plan.discover_dir(spec);
-            if discovery_done(&dir, spec).is_none() {
-                eprintln!(
-                    "reproduce: discovering the world graph ({} rounds)",
-                    spec.rounds
-                );
-                let job = Job::Discover { spec: spec.clone() };
-                wait_ok(
-                    start(
-                        discover_command(&plan, spec)?,
-                        &plan.log_path(&job),
-                        plan.threads,
-                    )?,
-                    &plan.log_path(&job),
-                )?;
-            }
-            Some(std::fs::canonicalize(&dir)?)
-        }
-        None => None,
-    };
-    eprintln!(
-        "reproduce: training {} in {}",
-        Plan::label(&Job::Train {
-            maze,
-            task,
-            config: r.config.clone(),
-            seed: r.seed,
-            needs: None
-        }),
-        work.display()
-    );
-    let job = Job::Train {
-        maze,
-        task,
-        config: r.config.clone(),
-        seed: r.seed,
-        needs: r.discover.as_ref().map(|_| 0),
-    };
-    wait_ok(
-        start(
-            train_command(
-                &plan,
-                &r.train_config,
-                maze,
-                task,
-                &r.config,
-                r.seed,
-                graph.as_deref(),
-            )?,
-            &plan.log_path(&job),
-            plan.threads,
-        )?,
-        &plan.log_path(&job),
-    )?;
-    let dir = plan.train_dir(maze, task, &r.config, r.seed);
-    let t: TestSummary = serde_json::from_slice(&std::fs::read(dir.join("test.json"))?)?;
-    println!(
-        "recorded test score {:.6} (commit {}), reproduced {:.6} (commit {})",
-        r.test_score, r.commit, t.test_score, plan.commit
-    );
-    if t.test_score == r.test_score {
-        println!("reproduced: the same test score");
-        Ok(std::process::ExitCode::SUCCESS)
-    } else {
-        eprintln!("error: the rerun's test score differs from the summary's");
-        Ok(std::process::ExitCode::FAILURE)
-    }
-}
-
-fn wait_ok(mut child: Child, log: &Path) -> anyhow::Result<()> {
-    let status = child.wait()?;
-    anyhow::ensure!(
-        status.success(),
-        "{status}; the end of {}:\n{}",
-        log.display(),
-        tail(log, 6)
-    );
-    Ok(())
 }

@@ -1,0 +1,291 @@
+//! A training run's settings (`config.toml`) and identity: what `train`
+//! is configured by, how `--config` and `--set` combine, the budget the
+//! protocol actually trains, and what must match for a run to resume.
+
+use std::path::Path;
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+use sim::Task;
+
+use super::protocol::MAX_EVAL_SEEDS;
+use crate::hrl::{AgentConfig, AgentKind, HrlAgent};
+use sim::Layout;
+
+/// Everything `train` is configured by (the run's `config.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Env-step budget.
+    pub env_steps: u64,
+    /// Env steps per segment (validation and checkpoint after each).
+    pub eval_every: u64,
+    /// Validation seeds.
+    pub validation_seeds: usize,
+    /// Test seeds.
+    pub test_seeds: usize,
+    /// The agent.
+    pub agent: AgentConfig,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            env_steps: 1_000_000,
+            eval_every: 50_000,
+            validation_seeds: 10,
+            test_seeds: 100,
+            agent: AgentConfig::default(),
+        }
+    }
+}
+
+/// A run's identity: what must match to resume it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunIdentity {
+    /// Maze.
+    pub maze: String,
+    /// Task.
+    pub task: Task,
+    /// Seed.
+    pub seed: u64,
+    /// The discovery run (canonical path), if any.
+    pub world_graph: Option<String>,
+    /// The resolved configuration, less the budget.
+    pub config: TrainConfig,
+}
+
+impl RunIdentity {
+    /// Every field in which this saved identity differs from `now`, in
+    /// words: `config.agent.horizon: 20 there, 15 here; ...`.
+    pub fn differences(&self, now: &RunIdentity) -> String {
+        super::identity::describe(&super::identity::differences(self, now, &[]))
+    }
+}
+
+/// Refuses a budget that cannot run (before anything is written): no
+/// segment, no validation or test seed, or batches larger than a run can
+/// hold (`file`, the --config file, is named).
+pub fn check_budget(cfg: &TrainConfig, file: Option<&Path>) -> anyhow::Result<()> {
+    let from = file.map_or(String::new(), |f| format!(" (in {})", f.display()));
+    anyhow::ensure!(cfg.eval_every > 0, "eval_every must be at least 1");
+    anyhow::ensure!(
+        cfg.validation_seeds > 0 && cfg.test_seeds > 0,
+        "validation_seeds and test_seeds must be at least 1"
+    );
+    let max_envs = shm_schemas::MAX_ENVS;
+    anyhow::ensure!(
+        cfg.agent.envs <= max_envs,
+        "[agent] envs = {}{from}: at most {max_envs} environments",
+        cfg.agent.envs
+    );
+    for (name, n) in [
+        ("validation_seeds", cfg.validation_seeds),
+        ("test_seeds", cfg.test_seeds),
+    ] {
+        anyhow::ensure!(
+            n as u64 <= MAX_EVAL_SEEDS,
+            "{name} = {n}{from}: at most {MAX_EVAL_SEEDS} seeds"
+        );
+    }
+    Ok(())
+}
+
+/// The training settings of `--config` (or the defaults) with every
+/// `--set KEY=VALUE` applied: each names a dotted path into the TOML and a
+/// TOML value (a bare word that is not one is taken as a string).
+pub fn config_with_overrides(
+    file: Option<&Path>,
+    overrides: &[String],
+) -> anyhow::Result<TrainConfig> {
+    let base = match file {
+        Some(p) => read_config(p)?,
+        None => TrainConfig::default(),
+    };
+    if overrides.is_empty() {
+        return Ok(base);
+    }
+    let mut doc = toml::Value::try_from(&base).context("the settings do not serialise")?;
+    for o in overrides {
+        let (key, value) = o
+            .split_once('=')
+            .with_context(|| format!("--set {o}: expected KEY=VALUE, e.g. agent.horizon=15"))?;
+        let (key, value) = (key.trim(), value.trim());
+        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut at = &mut doc;
+        let parts: Vec<&str> = key.split('.').collect();
+        for (i, part) in parts.iter().enumerate() {
+            let table = at
+                .as_table_mut()
+                .with_context(|| format!("--set {o}: {} is not a table", parts[..i].join(".")))?;
+            if i + 1 == parts.len() {
+                anyhow::ensure!(
+                    table.contains_key(*part),
+                    "--set {o}: the training settings have no field {key}"
+                );
+                table.insert(part.to_string(), value.clone());
+                break;
+            }
+            at = table
+                .get_mut(*part)
+                .with_context(|| format!("--set {o}: the training settings have no field {key}"))?;
+        }
+    }
+    TrainConfig::deserialize(doc).map_err(|e| anyhow::anyhow!("--set: {}", e.message()))
+}
+
+/// Reads a TOML config file.
+pub fn read_config(path: &Path) -> anyhow::Result<TrainConfig> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    toml::from_str(&text)
+        .with_context(|| format!("{} is not a valid training config", path.display()))
+}
+
+/// The env steps a run of `cfg` trains: its budget rounded up to whole
+/// segments of whole iterations.
+pub fn trained_env_steps(cfg: &TrainConfig) -> u64 {
+    let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
+    let per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1) * steps_per_iter;
+    cfg.env_steps.div_ceil(per_segment) * per_segment
+}
+
+/// What `0 = auto` stands for in `cfg` on this run: the Manager horizon
+/// `c` (FN and WN; A2C has no Manager) and the narrow window's side (WN,
+/// from `agent`'s wide-goal candidates, so `None` without an agent).
+pub fn auto_values(
+    cfg: &AgentConfig,
+    agent: Option<&HrlAgent>,
+    layout: &Layout,
+) -> (Option<usize>, Option<usize>) {
+    let horizon = (cfg.kind != AgentKind::A2c).then(|| {
+        AgentConfig {
+            horizon: 0,
+            ..cfg.clone()
+        }
+        .horizon() as usize
+    });
+    let window = agent
+        .filter(|_| cfg.kind == AgentKind::WideNarrow)
+        .and_then(|agent| {
+            if cfg.window == 0 {
+                // The side the agent resolved and uses.
+                agent.window_coverage().map(|c| c.side)
+            } else {
+                let base = AgentConfig {
+                    window: 0,
+                    ..cfg.clone()
+                }
+                .window_side(layout.width);
+                Some(crate::hrl::wide_narrow::covering_side(
+                    base,
+                    agent.candidates(),
+                    layout,
+                ))
+            }
+        });
+    (horizon, window)
+}
+
+/// `cfg` with each `0 = auto` replaced by the value it stands for (from
+/// [`auto_values`]); a setting the agent does not have (A2C's horizon and
+/// window, FN's window), or whose value is unknown, stays as given.
+pub fn resolve_auto(
+    cfg: &AgentConfig,
+    (horizon, window): (Option<usize>, Option<usize>),
+) -> AgentConfig {
+    let mut r = cfg.clone();
+    if r.horizon == 0
+        && let Some(h) = horizon
+    {
+        r.horizon = h;
+    }
+    if r.window == 0
+        && let Some(w) = window
+    {
+        r.window = w;
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hrl::Candidates;
+    use sim::{Maze, Task};
+
+    /// Issue 21, item 8: the budget a run trains is its rounding to whole
+    /// segments (`--env-steps 2000` trains 51,840 with the defaults).
+    #[test]
+    fn the_budget_rounds_up_to_whole_segments() {
+        for (budget, trained) in [(2000, 51_840), (51_840, 51_840), (51_841, 2 * 51_840)] {
+            let cfg = TrainConfig {
+                env_steps: budget,
+                ..TrainConfig::default()
+            };
+            assert_eq!(trained_env_steps(&cfg), trained, "{budget}");
+        }
+    }
+
+    /// Issue 21: `0 = auto` resolves to the values the agent uses; a
+    /// setting the agent lacks stays 0, and an explicit value stays.
+    #[test]
+    fn auto_settings_resolve_to_what_the_agent_uses() {
+        let layout = Maze::Small.layout(false);
+        let wn = AgentConfig {
+            kind: AgentKind::WideNarrow,
+            candidates: Candidates::All,
+            envs: 1,
+            rollout_len: 21,
+            ..AgentConfig::default()
+        };
+        let agent = HrlAgent::new(&wn, &layout, Task::MultiGoal, None, 0).unwrap();
+        let auto = auto_values(&wn, Some(&agent), &layout);
+        let side = agent.window_coverage().unwrap().side;
+        assert_eq!(auto, (Some(7), Some(side)));
+        let r = resolve_auto(&wn, auto);
+        assert_eq!((r.horizon, r.window), (7, side));
+        assert!(side >= 5 && side % 2 == 1, "{side}");
+        // The resolved settings build the same agent.
+        let again = HrlAgent::new(&r, &layout, Task::MultiGoal, None, 0).unwrap();
+        assert_eq!(again.window_coverage().unwrap().side, side);
+        let explicit = AgentConfig {
+            horizon: 4,
+            ..wn.clone()
+        };
+        assert_eq!(resolve_auto(&explicit, auto).horizon, 4);
+        let a2c = AgentConfig {
+            kind: AgentKind::A2c,
+            ..wn.clone()
+        };
+        let r = resolve_auto(&a2c, auto_values(&a2c, None, &layout));
+        assert_eq!((r.horizon, r.window), (0, 0), "A2C has neither");
+        let fnet = AgentConfig {
+            kind: AgentKind::Feudal,
+            ..wn
+        };
+        let r = resolve_auto(&fnet, auto_values(&fnet, None, &layout));
+        assert_eq!((r.horizon, r.window), (7, 0), "FN has a horizon, no window");
+    }
+
+    /// Issue 21, item 8: the config's agent kind may be spelled as the
+    /// CLI's `--agent` spells it.
+    #[test]
+    fn the_config_accepts_the_clis_agent_kinds() {
+        for (text, kind) in [
+            ("fn", AgentKind::Feudal),
+            ("feudal", AgentKind::Feudal),
+            ("wn", AgentKind::WideNarrow),
+            ("wide-narrow", AgentKind::WideNarrow),
+            ("a2c", AgentKind::A2c),
+        ] {
+            let cfg: TrainConfig = toml::from_str(&format!("[agent]\nkind = \"{text}\"\n"))
+                .unwrap_or_else(|e| panic!("kind = {text:?}: {e}"));
+            assert_eq!(cfg.agent.kind, kind, "{text}");
+        }
+    }
+}

@@ -1,0 +1,270 @@
+//! [`WorldGraph`] and its [`Route`]s: a `planner::WorldGraph` and its
+//! dynamic-programming routes (section 3.3).
+
+use super::*;
+
+/// A planned route: `actions[i]` is the `i`-th action (MiniGrid numbering)
+/// and `cells[i]` the agent's `(x, y)` after it; `nodes` are the graph
+/// nodes passed, first to target.
+#[pyclass(module = "worldgraph._worldgraph", frozen, get_all)]
+pub(crate) struct Route {
+    /// `(x, y, dir)` the route starts from.
+    start: (u16, u16, u8),
+    /// Actions, MiniGrid numbering.
+    actions: Vec<u8>,
+    /// The agent's `(x, y)` after each action.
+    cells: Vec<(u16, u16)>,
+    /// Node ids passed, first to target.
+    nodes: Vec<u16>,
+}
+
+#[pymethods]
+impl Route {
+    fn __len__(&self) -> usize {
+        self.actions.len()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "Route(start={:?}, {} actions, nodes={:?})",
+            self.start,
+            self.actions.len(),
+            self.nodes
+        )
+    }
+}
+
+/// A world graph: pivotal states (nodes), edges with their recorded action
+/// paths, and all-pairs shortest paths (the planner's dynamic programme).
+#[pyclass(module = "worldgraph._worldgraph", frozen)]
+pub(crate) struct WorldGraph {
+    graph: planner::WorldGraph,
+}
+
+impl WorldGraph {
+    fn node(&self, id: i64) -> PyResult<NodeId> {
+        let n = self.graph.num_nodes();
+        if id < 0 || id as usize >= n {
+            return Err(PlanError::new_err(format!(
+                "unknown node {id}: the graph has nodes 0..{n}"
+            )));
+        }
+        Ok(NodeId(id as u16))
+    }
+
+    fn route_object(&self, r: &planner::Route) -> Route {
+        let w = self.graph.layout().width;
+        let start = r.start().map_or((0, 0, 0), |p| (p.x, p.y, p.dir));
+        Route {
+            start,
+            actions: r.actions().to_vec(),
+            cells: r.cells().iter().map(|c| c.xy(w)).collect(),
+            nodes: r.nodes().iter().map(|n| n.0).collect(),
+        }
+    }
+}
+
+#[pymethods]
+impl WorldGraph {
+    /// Loads a graph saved by the planner (`graph.json` of a
+    /// `worldgraph discover` run). Every edge is replayed in the simulator
+    /// on load; a malformed file raises `PlanError`.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<WorldGraph> {
+        let graph = py
+            .detach(|| planner::WorldGraph::load(&path))
+            .map_err(plan_err)?;
+        Ok(WorldGraph { graph })
+    }
+
+    /// Builds the graph over the given node cells `[(x, y), ...]` of a maze
+    /// or ASCII layout: edges from random walks (seeded by `seed`), each
+    /// shortened by an exact search, then all-pairs shortest paths. Cells
+    /// the agent cannot stand on are dropped (as when a discover run's
+    /// pivotal states are moved to the Door-Key variant of their maze).
+    /// `task` decides the walks' rules (Door-Key: balls block, the key and
+    /// doors work). `exhaustive=True` finds every edge random walks could
+    /// ever find, by a search over states, instead of the walks: the edges
+    /// that need the key fetched and the door opened on the way, which
+    /// walks stopping at the first node they meet rarely find.
+    #[staticmethod]
+    #[pyo3(signature = (nodes, task="multigoal", maze=None, layout=None, seed=0, exhaustive=false))]
+    fn build(
+        py: Python<'_>,
+        nodes: Vec<(u16, u16)>,
+        task: &str,
+        maze: Option<&str>,
+        layout: Option<&str>,
+        seed: u64,
+        exhaustive: bool,
+    ) -> PyResult<WorldGraph> {
+        let task = parse_task(task)?;
+        let layout = layout_of(task, maze, layout)?;
+        let mut cells = Vec::with_capacity(nodes.len());
+        for (x, y) in nodes {
+            if x as usize >= layout.width || y as usize >= layout.height {
+                return Err(PlanError::new_err(format!(
+                    "cell ({x}, {y}) is outside the {}x{} grid",
+                    layout.width, layout.height
+                )));
+            }
+            cells.push(CellIdx::from_xy(x as usize, y as usize, layout.width).0);
+        }
+        let given = planner::pivotal::nodes_from_cells(&layout, &cells);
+        if given.is_empty() {
+            return Err(PlanError::new_err("no node cell the agent can stand on"));
+        }
+        let cfg = PlannerConfig {
+            candidates: planner::CandidateSet::Given,
+            seed,
+            // The walks follow the task's rules (`PlannerConfig::walk_task`:
+            // MultiGoal-Stochastic walks as MultiGoal).
+            task,
+            shorten: true,
+            edge_search: if exhaustive {
+                planner::EdgeSearch::Exhaustive
+            } else {
+                planner::EdgeSearch::RandomWalks
+            },
+            ..PlannerConfig::default()
+        };
+        let graph = py
+            .detach(|| planner::WorldGraph::build(&layout, &cfg, &given))
+            .map_err(plan_err)?;
+        Ok(WorldGraph { graph })
+    }
+
+    /// Saves the graph as JSON (the planner's format), atomically.
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        self.graph.save(&path).map_err(plan_err)
+    }
+
+    /// Number of nodes.
+    #[getter]
+    fn num_nodes(&self) -> usize {
+        self.graph.num_nodes()
+    }
+    /// The nodes (pivotal states) as `(x, y)`, by node id.
+    #[getter]
+    fn nodes(&self) -> Vec<(u16, u16)> {
+        let w = self.graph.layout().width;
+        self.graph.nodes().iter().map(|c| c.xy(w)).collect()
+    }
+    /// Edges as `(from, to, weight)`, weight = actions of the edge's path.
+    #[getter]
+    fn edges(&self) -> Vec<(u16, u16, u32)> {
+        self.graph
+            .edges()
+            .iter()
+            .map(|e| (e.from.0, e.to.0, e.weight()))
+            .collect()
+    }
+    /// Columns of the graph's layout.
+    #[getter]
+    fn width(&self) -> usize {
+        self.graph.layout().width
+    }
+    /// Rows of the graph's layout.
+    #[getter]
+    fn height(&self) -> usize {
+        self.graph.layout().height
+    }
+    /// The graph's layout in its ASCII format.
+    #[getter]
+    fn layout_text(&self) -> String {
+        self.graph.layout().to_text()
+    }
+    /// The graph's layout's name.
+    #[getter]
+    fn layout_name(&self) -> String {
+        self.graph.layout().name.clone()
+    }
+    /// The task whose rules the edge walks followed.
+    #[getter]
+    fn task(&self) -> &'static str {
+        self.graph.config().task.name()
+    }
+
+    /// The node at cell `(x, y)`, or None.
+    fn node_at(&self, x: usize, y: usize) -> Option<u16> {
+        let l = self.graph.layout();
+        if x >= l.width || y >= l.height {
+            return None;
+        }
+        self.graph
+            .node_at(CellIdx::from_xy(x, y, l.width))
+            .map(|n| n.0)
+    }
+
+    /// Shortest distance (sum of edge weights) from node `a` to node `b`,
+    /// or None when `b` cannot be reached.
+    fn distance(&self, a: i64, b: i64) -> PyResult<Option<u32>> {
+        let d = self.graph.distance(self.node(a)?, self.node(b)?);
+        Ok((d != planner::UNREACHABLE).then_some(d))
+    }
+
+    /// The route from node `start` (standing there facing `facing`) to node
+    /// `target`, in the layout's initial world: the edges of the shortest
+    /// path, each edge's recorded actions in turn, with the turns between
+    /// edges. Raises `PlanError` for an unknown node or no path.
+    #[pyo3(signature = (start, target, facing=0))]
+    fn route(&self, start: i64, target: i64, facing: u8) -> PyResult<Route> {
+        let mut r = planner::Route::with_capacity(256, 16);
+        self.graph
+            .route_into(self.node(start)?, facing, self.node(target)?, &mut r)
+            .map_err(plan_err)?;
+        Ok(self.route_object(&r))
+    }
+
+    /// The route from any pose `(x, y, dir)` to node `target`: the shortest
+    /// way to the nearest node, then the graph route. `grid` (the
+    /// observation's cell codes, `height × width`) and `carrying` (cell code,
+    /// 255 nothing) describe the current world (open doors, key in hand);
+    /// without them, the layout's initial world.
+    #[pyo3(signature = (x, y, dir, target, grid=None, carrying=255))]
+    fn route_from_pose(
+        &self,
+        x: u16,
+        y: u16,
+        dir: u8,
+        target: i64,
+        grid: Option<Vec<u8>>,
+        carrying: u8,
+    ) -> PyResult<Route> {
+        let world = match grid {
+            Some(g) => {
+                let l = self.graph.layout();
+                if g.len() != l.width * l.height {
+                    return Err(PyValueError::new_err(format!(
+                        "grid has {} cells, the layout {}",
+                        g.len(),
+                        l.width * l.height
+                    )));
+                }
+                self.graph.observe_world(&g, carrying)
+            }
+            None => self.graph.initial_world(),
+        };
+        let mut r = planner::Route::with_capacity(256, 16);
+        self.graph
+            .route_from_pose_into(sim::Pose { x, y, dir }, self.node(target)?, world, &mut r)
+            .map_err(plan_err)?;
+        Ok(self.route_object(&r))
+    }
+
+    /// An RGB picture of the maze with the graph drawn on it.
+    #[pyo3(signature = (cell_px=16))]
+    fn render<'py>(&self, py: Python<'py>, cell_px: usize) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let c = self.graph.render(cell_px);
+        let (w, h) = (c.width, c.height);
+        PyArray1::from_vec(py, c.rgb).reshape([h, w, 3])
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "WorldGraph(layout={:?}, {} nodes, {} edges)",
+            self.graph.layout().name,
+            self.graph.num_nodes(),
+            self.graph.edges().len()
+        )
+    }
+}

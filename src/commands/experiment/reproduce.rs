@@ -1,0 +1,155 @@
+//! `worldgraph experiment --reproduce SUMMARY`: reruns the one run a
+//! committed summary describes (its discovery too, when it had one) on
+//! this binary, and compares the test scores.
+
+use std::path::{Path, PathBuf};
+use std::process::Child;
+
+use anyhow::Context;
+use learner::run::protocol::TestSummary;
+use sim::{Maze, Task};
+
+use super::grid::{Grid, MazeBudget};
+use super::{
+    ExperimentArgs, Job, Plan, discover_command, discovery_done, start, tail, train_command,
+};
+use crate::results::{build_commit, read_run};
+
+/// `--reproduce`: reruns one recorded run in a scratch working directory.
+pub(super) fn reproduce(
+    summary: &Path,
+    a: &ExperimentArgs,
+) -> anyhow::Result<std::process::ExitCode> {
+    let r = read_run(summary)?;
+    let maze: Maze = r
+        .maze
+        .parse()
+        .map_err(|e| anyhow::anyhow!("{}: maze {:?}: {e}", summary.display(), r.maze))?;
+    let task: Task = r
+        .task
+        .parse()
+        .map_err(|e| anyhow::anyhow!("{}: task {:?}: {e}", summary.display(), r.task))?;
+    let work = a.work.clone().unwrap_or_else(|| {
+        PathBuf::from("runs/reproduce").join(format!(
+            "{}-{}-{}-seed-{}",
+            r.maze, r.task, r.config, r.seed
+        ))
+    });
+    let grid = Grid {
+        name: "reproduce".to_string(),
+        seeds: vec![r.seed],
+        validation_seeds: r.validation_seeds,
+        test_seeds: r.test_seeds,
+        maze: vec![MazeBudget {
+            name: maze,
+            env_steps: r.train_config.env_steps,
+            eval_every: r.train_config.eval_every,
+            discover_rounds: r.discover.as_ref().map_or(1, |d| d.rounds),
+        }],
+        // The discovery settings the summary's grid pins, if it does.
+        discover_config: match &r.discover {
+            Some(_) => {
+                Grid::read(Path::new(&r.grid))
+                    .with_context(|| {
+                        format!(
+                            "{} names grid {}, whose discover_config the world graph needs",
+                            summary.display(),
+                            r.grid
+                        )
+                    })?
+                    .discover_config
+            }
+            None => None,
+        },
+        group: Vec::new(),
+    };
+    let plan = Plan {
+        grid,
+        grid_label: r.grid.clone(),
+        work: work.clone(),
+        results: work.join("results"),
+        threads: r.torch_threads,
+        jobs: 1,
+        commit: build_commit(),
+    };
+    let graph = match &r.discover {
+        Some(spec) => {
+            let dir = plan.discover_dir(spec);
+            if discovery_done(&dir, spec).is_none() {
+                eprintln!(
+                    "reproduce: discovering the world graph ({} rounds)",
+                    spec.rounds
+                );
+                let job = Job::Discover { spec: spec.clone() };
+                wait_ok(
+                    start(
+                        discover_command(&plan, spec)?,
+                        &plan.log_path(&job),
+                        plan.threads,
+                    )?,
+                    &plan.log_path(&job),
+                )?;
+            }
+            Some(std::fs::canonicalize(&dir)?)
+        }
+        None => None,
+    };
+    eprintln!(
+        "reproduce: training {} in {}",
+        Plan::label(&Job::Train {
+            maze,
+            task,
+            config: r.config.clone(),
+            seed: r.seed,
+            needs: None
+        }),
+        work.display()
+    );
+    let job = Job::Train {
+        maze,
+        task,
+        config: r.config.clone(),
+        seed: r.seed,
+        needs: r.discover.as_ref().map(|_| 0),
+    };
+    wait_ok(
+        start(
+            train_command(
+                &plan,
+                &r.train_config,
+                maze,
+                task,
+                &r.config,
+                r.seed,
+                graph.as_deref(),
+            )?,
+            &plan.log_path(&job),
+            plan.threads,
+        )?,
+        &plan.log_path(&job),
+    )?;
+    let dir = plan.train_dir(maze, task, &r.config, r.seed);
+    let t: TestSummary = serde_json::from_slice(&std::fs::read(dir.join("test.json"))?)?;
+    println!(
+        "recorded test score {:.6} (commit {}), reproduced {:.6} (commit {})",
+        r.test_score, r.commit, t.test_score, plan.commit
+    );
+    if t.test_score == r.test_score {
+        println!("reproduced: the same test score");
+        Ok(std::process::ExitCode::SUCCESS)
+    } else {
+        eprintln!("error: the rerun's test score differs from the summary's");
+        Ok(std::process::ExitCode::FAILURE)
+    }
+}
+
+fn wait_ok(mut child: Child, log: &Path) -> anyhow::Result<()> {
+    let status = child.wait()?;
+    anyhow::ensure!(
+        status.success(),
+        "{status}; the end of {}:\n{}",
+        log.display(),
+        tail(log, 6)
+    );
+    Ok(())
+}
