@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
-use learner::run::artefact::DiscoveryIdentity;
+use learner::run::artefact::{DiscoveryIdentity, read_discovery_config};
 use learner::run::dir;
 use serde::Serialize;
 use sim::render::{Canvas, Rgb, draw_grid, object_color};
@@ -159,23 +159,11 @@ fn world(a: &DiscoverArgs, seed: u64) -> WorldArgs {
 /// `train` and `discover` keep in process too.
 const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
 
-/// Reads a TOML discovery config (unknown keys refused).
-pub fn read_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
-    let text =
-        std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-    toml::from_str(&text).map_err(|e| {
-        anyhow::anyhow!(
-            "{} is not a valid discovery config (TOML): {}",
-            p.display(),
-            e.to_string().trim_end()
-        )
-    })
-}
 
 /// Runs `worldgraph discover`.
 pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut cfg: DiscoveryConfig = match &a.config {
-        Some(p) => read_config(p)?,
+        Some(p) => read_discovery_config(p)?,
         None => DiscoveryConfig::default(),
     };
     // A flag given overrides the file; a flag not given keeps the file's value.

@@ -181,6 +181,19 @@ impl DiscoveryIdentity {
     }
 }
 
+/// Reads a TOML discovery config (unknown keys refused).
+pub fn read_discovery_config(p: &Path) -> anyhow::Result<DiscoveryConfig> {
+    let text =
+        std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    toml::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "{} is not a valid discovery config (TOML): {}",
+            p.display(),
+            e.to_string().trim_end()
+        )
+    })
+}
+
 /// `π_g` of a discovery run, for `layout` (its weights fit any layout of
 /// the same size).
 pub fn load_gcp(dir: &Path, layout: &Layout) -> anyhow::Result<GoalConditionedPolicy> {

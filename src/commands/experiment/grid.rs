@@ -179,7 +179,7 @@ impl Grid {
             );
             // The discoveries would refuse it one by one: refused here,
             // `--dry-run` included.
-            crate::commands::discover::read_config(c)
+            learner::run::artefact::read_discovery_config(c)
                 .and_then(|cfg| {
                     cfg.validate()
                         .with_context(|| format!("{} is not a valid discovery config", c.display()))
