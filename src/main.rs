@@ -2,12 +2,13 @@
 //!
 //! Starts each role of the pipeline, runs the simulator's tools and the
 //! benchmarks. Shang et al. 2019 (arXiv:1907.00664) is implemented by the
-//! library crates; this binary parses arguments (clap), turns them into
-//! validated configs and calls the libraries, and it also holds the run
-//! layer around them: the paper's training protocol and run directories
-//! (`commands/train.rs`, `commands/discover.rs`), the experiment grid and
-//! its results (`commands/experiment.rs`, `results.rs`), the pipeline's
-//! process roles (`roles/`) and the charts (`chart/`).
+//! library crates, the paper's protocol and run directories included
+//! (`learner::run`); this binary parses arguments (clap), turns them into
+//! validated configs, calls the libraries and prints. Beside the commands
+//! it holds the experiment grid's process scheduling and its result files
+//! (`commands/experiment/`, `results.rs`), the pipeline's process roles
+//! (`roles/`), the update log (`update_log.rs`) and the pictures
+//! (`chart/`, `episode_picture.rs`).
 
 use std::process::ExitCode;
 
