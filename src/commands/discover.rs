@@ -159,7 +159,6 @@ fn world(a: &DiscoverArgs, seed: u64) -> WorldArgs {
 /// `train` and `discover` keep in process too.
 const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
 
-
 /// Runs `worldgraph discover`.
 pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut cfg: DiscoveryConfig = match &a.config {

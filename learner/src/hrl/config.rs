@@ -245,16 +245,26 @@ impl AgentConfig {
 
     /// A short name: `a2c`, `fn`, `fn-init`, `wn-pivotal-trav-init`, ...
     pub fn name(&self) -> String {
+        self.spelled(
+            ["a2c", "fn", &format!("wn-{}", self.candidates.name())],
+            ["-trav", "-init"],
+        )
+    }
+
+    /// The agent kind's word (A2C, FN, WN), then the traversal's and the
+    /// initialisation's suffix where they are on.
+    fn spelled(&self, kinds: [&str; 3], [trav, init]: [&str; 2]) -> String {
         let mut s = match self.kind {
-            AgentKind::A2c => "a2c".to_string(),
-            AgentKind::Feudal => "fn".to_string(),
-            AgentKind::WideNarrow => format!("wn-{}", self.candidates.name()),
-        };
+            AgentKind::A2c => kinds[0],
+            AgentKind::Feudal => kinds[1],
+            AgentKind::WideNarrow => kinds[2],
+        }
+        .to_string();
         if self.traversal {
-            s.push_str("-trav");
+            s.push_str(trav);
         }
         if self.init_from_gcp {
-            s.push_str("-init");
+            s.push_str(init);
         }
         s
     }
@@ -314,18 +324,10 @@ impl AgentConfig {
     /// The paper's name: `A2C`, `FN + π_g init`,
     /// `WN V_p + traversal + π_g init`, ...
     pub fn label(&self) -> String {
-        let mut s = match self.kind {
-            AgentKind::A2c => "A2C".to_string(),
-            AgentKind::Feudal => "FN".to_string(),
-            AgentKind::WideNarrow => format!("WN {}", self.candidates.label()),
-        };
-        if self.traversal {
-            s.push_str(" + traversal");
-        }
-        if self.init_from_gcp {
-            s.push_str(" + π_g init");
-        }
-        s
+        self.spelled(
+            ["A2C", "FN", &format!("WN {}", self.candidates.label())],
+            [" + traversal", " + π_g init"],
+        )
     }
 }
 
@@ -387,4 +389,47 @@ pub enum WorkerTaskEnd {
     /// cell like any other, neither a goal nor a trap.
     #[default]
     Cut,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every configuration a grid can name parses back to itself, carries
+    /// the paper's label, and says whether it needs a discovery run; the
+    /// names no agent has are refused.
+    #[test]
+    fn configuration_names_round_trip_and_carry_the_papers_labels() {
+        let base = AgentConfig::default();
+        for (name, label, needs) in [
+            ("a2c", "A2C", false),
+            ("fn", "FN", false),
+            ("fn-init", "FN + π_g init", true),
+            ("wn-all", "WN V_all", false),
+            (
+                "wn-random-trav-init",
+                "WN V_rand + traversal + π_g init",
+                true,
+            ),
+            ("wn-pivotal-trav", "WN V_p + traversal", true),
+            ("wn-pivotal-init", "WN V_p + π_g init", true),
+        ] {
+            let cfg = AgentConfig::from_name(name, &base).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(cfg.name(), name);
+            assert_eq!(cfg.label(), label);
+            assert_eq!(cfg.needs_discovery(Task::MultiGoal), needs, "{name}");
+        }
+        for bad in ["a2c-trav", "wn", "wn-pivotal-init-trav", "dqn"] {
+            assert!(AgentConfig::from_name(bad, &base).is_err(), "{bad}");
+        }
+        let fn_trav = AgentConfig::from_name("fn", &base).map(|c| AgentConfig {
+            traversal: true,
+            ..c
+        });
+        assert!(
+            fn_trav.is_ok_and(|c| !c.needs_discovery(Task::MultiGoal)
+                && c.needs_discovery(Task::MultiGoalStochastic)),
+            "steered traversal needs π_g"
+        );
+    }
 }

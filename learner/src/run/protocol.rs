@@ -300,34 +300,29 @@ fn csv_writer() -> String {
 /// goals reached weighted by their counts).
 pub fn mean_row(stats: &[IterationStats]) -> MetricsRow {
     let n = stats.len().max(1) as f64;
-    let with_episodes: Vec<&IterationStats> = stats.iter().filter(|s| s.episodes > 0).collect();
-    let episodes: usize = with_episodes.iter().map(|s| s.episodes).sum();
-    let intervals: usize = stats.iter().map(|s| s.intervals).sum();
+    // The mean of `value` over the iterations, each weighted by `weight`
+    // (0 when every weight is).
+    let weighted = |value: fn(&IterationStats) -> f64, weight: fn(&IterationStats) -> usize| {
+        let total: usize = stats.iter().map(weight).sum();
+        if total == 0 {
+            return 0.0;
+        }
+        stats
+            .iter()
+            .filter(|s| weight(s) > 0)
+            .map(|s| value(s) * weight(s) as f64)
+            .sum::<f64>()
+            / total as f64
+    };
     MetricsRow {
-        train_return: if episodes > 0 {
-            with_episodes
-                .iter()
-                .map(|s| s.mean_return * s.episodes as f64)
-                .sum::<f64>()
-                / episodes as f64
-        } else {
-            0.0
-        },
+        train_return: weighted(|s| s.mean_return, |s| s.episodes),
         worker_policy_loss: stats.iter().map(|s| s.worker.policy_loss).sum::<f64>() / n,
         worker_value_loss: stats.iter().map(|s| s.worker.value_loss).sum::<f64>() / n,
         worker_entropy: stats.iter().map(|s| s.worker.entropy).sum::<f64>() / n,
         manager_policy_loss: stats.iter().map(|s| s.manager.policy_loss).sum::<f64>() / n,
         manager_value_loss: stats.iter().map(|s| s.manager.value_loss).sum::<f64>() / n,
         manager_entropy: stats.iter().map(|s| s.manager.entropy).sum::<f64>() / n,
-        goals_reached: if intervals > 0 {
-            stats
-                .iter()
-                .map(|s| s.goals_reached * s.intervals as f64)
-                .sum::<f64>()
-                / intervals as f64
-        } else {
-            0.0
-        },
+        goals_reached: weighted(|s| s.goals_reached, |s| s.intervals),
         traversal_share: stats.iter().map(|s| s.traversal_share).sum::<f64>() / n,
         ..MetricsRow::default()
     }
