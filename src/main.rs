@@ -62,7 +62,7 @@ enum Command {
     Demo(commands::demo::DemoArgs),
     /// The three processes side by side (sim, learner, planner) over shared
     /// memory, stopped together on Ctrl-C.
-    Run(commands::run::RunCmdArgs),
+    Run(pipeline::RunCmdArgs),
     /// The three processes for M minutes, optionally killing one every S
     /// seconds; reports losses, leaks, recoveries and p99 per minute.
     Soak(commands::soak::SoakArgs),

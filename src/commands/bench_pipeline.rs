@@ -36,8 +36,8 @@ use serde::Serialize;
 use shm_schemas::EnvMeta;
 use sim::{BatchEnv, StepOut};
 
-use super::run::RunCmdArgs;
 use crate::latency::Latencies;
+use crate::pipeline::RunCmdArgs;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{OnPeerDeath, RunArgs};

@@ -29,9 +29,9 @@ use clap::Args;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use super::run::RunCmdArgs;
 use super::soak_report::{KillCost, Recovery, SoakReport};
 use crate::pipeline::Role;
+use crate::pipeline::RunCmdArgs;
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;

@@ -7,6 +7,10 @@
 //! SIGKILL only after a grace period, and the run's shared memory is torn
 //! down once all of them are gone.
 
+mod spec;
+
+pub use self::spec::RunCmdArgs;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};

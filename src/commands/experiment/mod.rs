@@ -78,6 +78,12 @@ pub struct ExperimentArgs {
     /// non-zero if not.
     #[arg(long, value_name = "SUMMARY.json", conflicts_with = "grid")]
     pub reproduce: Option<PathBuf>,
+    /// With --reproduce: train on this discover run instead of discovering
+    /// again (checked to have the summary's rounds), for a summary whose
+    /// world graph was discovered on an earlier commit (a grid reuses its
+    /// discoveries; the discovery's own summary names its commit).
+    #[arg(long, value_name = "DISCOVER_RUN", requires = "reproduce")]
+    pub world_graph: Option<PathBuf>,
 }
 
 /// One run of the grid.

@@ -72,8 +72,23 @@ pub(super) fn reproduce(
         jobs: 1,
         commit: build_commit(),
     };
-    let graph = match &r.discover {
-        Some(spec) => {
+    let graph = match (&r.discover, &a.world_graph) {
+        (Some(spec), Some(given)) => {
+            anyhow::ensure!(
+                discovery_done(given, spec).is_some(),
+                "--world-graph {}: not a finished discover run of {} rounds (the summary's)",
+                given.display(),
+                spec.rounds
+            );
+            eprintln!("reproduce: on the world graph of {}", given.display());
+            Some(std::fs::canonicalize(given)?)
+        }
+        (None, Some(given)) => anyhow::bail!(
+            "--world-graph {}: {} trained without a world graph",
+            given.display(),
+            summary.display()
+        ),
+        (Some(spec), None) => {
             let dir = plan.discover_dir(spec);
             if discovery_done(&dir, spec).is_none() {
                 eprintln!(
@@ -92,7 +107,7 @@ pub(super) fn reproduce(
             }
             Some(std::fs::canonicalize(&dir)?)
         }
-        None => None,
+        (None, None) => None,
     };
     eprintln!(
         "reproduce: training {} in {}",
