@@ -27,6 +27,7 @@ mod shutdown;
 mod stats;
 mod update_log;
 mod world;
+mod world_graph_picture;
 
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the
 /// paths between them) and use it to make hierarchical RL fast.

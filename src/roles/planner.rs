@@ -161,7 +161,7 @@ pub fn load_or_build(
         t0.elapsed()
     );
     graph.save(&path)?;
-    crate::commands::discover::graph_picture(&graph, false).save_png(&dir.join("graph.png"))?;
+    crate::world_graph_picture::graph_picture(&graph, false).save_png(&dir.join("graph.png"))?;
     Ok((graph, false))
 }
 
