@@ -6,12 +6,15 @@
 //! [THREADS]]`. Prints GFLOP/s (forward + backward = 3 × the forward's
 //! multiply-adds × 2) and the ratios; before that the GEMMs of the encoder
 //! in three libraries, after it the encoder past its first layer over a
-//! whole rollout. It asserts nothing; the kernels' equality with tch is
-//! tested in `a2c::kernels`.
+//! whole rollout, and the LSTM core with its heads over a rollout (tch's
+//! `lstm_cell` with autograd against [`learner::a2c::lstm`]). It asserts
+//! nothing; the kernels' equality with tch is tested in `a2c::kernels` and
+//! `a2c::lstm`.
 
 use std::time::Instant;
 
 use learner::a2c::kernels::{DenseRelu, StridedConv};
+use learner::a2c::lstm::{Heads, LstmCell, StepActivations, transposed};
 use tch::{Device, Kind, Tensor};
 
 /// One way to run the convolution's forward and backward once.
@@ -113,6 +116,7 @@ fn rollout_tail(name: &str, h: usize, w: usize, steps: usize, batch: usize, seco
     let x_own = floats(&x_nhwc);
     let (w2_own, b2_own) = (conv.gemm_weight(&floats(&w2)), floats(&b2));
     let (wf_own, bf_own) = (floats(&wf), floats(&bf));
+    let wf_own_t = learner::a2c::gemm::transposed(&wf_own, 128, fc.inputs);
     let up_own = floats(&up);
     let mut y2 = vec![0f32; n * conv.out_len()];
     let mut f = vec![0f32; n * 128];
@@ -139,7 +143,7 @@ fn rollout_tail(name: &str, h: usize, w: usize, steps: usize, batch: usize, seco
                 fc.forward(
                     &y2[r * fc.inputs..],
                     batch,
-                    &wf_own,
+                    &wf_own_t,
                     &bf_own,
                     &mut f[r * 128..],
                 );
@@ -240,6 +244,202 @@ fn gemm_table(seconds: f64) {
     }
 }
 
+/// The LSTM core (128 → 128) and the heads (3 actions, a value) over a
+/// rollout of `steps` steps of `batch` rows, the state reset for some rows
+/// between steps, forward and backward through time: tch's `lstm_cell`
+/// and `linear` with autograd, one backward over all steps; the own
+/// kernels ([`learner::a2c::lstm`]) whole, and their parts alone (the
+/// forward steps, the backward steps, the rollout's weight GEMMs; the
+/// heads' backward is the rest).
+fn core_rollout(steps: usize, batch: usize, seconds: f64) {
+    let (input, hidden, actions) = (128usize, 128usize, 3usize);
+    let (n, rows, g4) = (batch, steps * batch, 4 * hidden);
+    let opts = (Kind::Float, Device::Cpu);
+    let floats = |t: &Tensor| Vec::<f32>::try_from(&t.flatten(0, -1)).expect("floats");
+    let leaf = |shape: &[i64]| (Tensor::randn(shape, opts) * 0.1).set_requires_grad(true);
+    let (gi, hi, ai) = (g4 as i64, hidden as i64, actions as i64);
+    let (w_ih, w_hh) = (leaf(&[gi, input as i64]), leaf(&[gi, hi]));
+    let (b_ih, b_hh) = (leaf(&[gi]), leaf(&[gi]));
+    let (w_pi, b_pi, w_v, b_v) = (leaf(&[ai, hi]), leaf(&[ai]), leaf(&[1, hi]), leaf(&[1]));
+    let xs = Tensor::randn([steps as i64, n as i64, input as i64], opts).relu();
+    let x_leaf = xs.copy().set_requires_grad(true);
+    let keep: Vec<f32> = (0..rows).map(|k| if k % 17 == 0 { 0.0 } else { 1.0 }).collect();
+    let keep_t = Tensor::from_slice(&keep).view([steps as i64, n as i64, 1]);
+    let dl = Tensor::randn([steps as i64, n as i64, ai], opts);
+    let dv = Tensor::randn([steps as i64, n as i64], opts);
+
+    let cell = LstmCell { input, hidden };
+    let heads = Heads { hidden, actions };
+    let (ow_ih, ow_hh) = (floats(&w_ih.detach()), floats(&w_hh.detach()));
+    let bias = floats(&(&b_ih + &b_hh).detach());
+    let (ow_pi, ob_pi) = (floats(&w_pi.detach()), floats(&b_pi.detach()));
+    let (ow_ih_t, ow_hh_t) = (transposed(&ow_ih, g4, input), transposed(&ow_hh, g4, hidden));
+    let ow_pi_t = transposed(&ow_pi, actions, hidden);
+    let (ow_v, ob_v) = (floats(&w_v.detach()), floats(&b_v.detach())[0]);
+    let (ox, odl, odv) = (floats(&xs), floats(&dl), floats(&dv));
+
+    /// The activations of a rollout.
+    struct Acts {
+        h_in: Vec<f32>,
+        c_in: Vec<f32>,
+        gates: Vec<f32>,
+        tanh_c: Vec<f32>,
+        h_out: Vec<f32>,
+        c: Vec<f32>,
+        logits: Vec<f32>,
+        values: Vec<f32>,
+    }
+    let new_acts = || Acts {
+        h_in: vec![0f32; rows * hidden],
+        c_in: vec![0f32; rows * hidden],
+        gates: vec![0f32; rows * g4],
+        tanh_c: vec![0f32; rows * hidden],
+        h_out: vec![0f32; rows * hidden],
+        c: vec![0f32; n * hidden],
+        logits: vec![0f32; rows * actions],
+        values: vec![0f32; rows],
+    };
+    let forward = |a: &mut Acts| {
+        a.c.fill(0.0);
+        for t in 0..steps {
+            let (s, m) = (t * n * hidden, n * hidden);
+            for r in 0..m {
+                let k = if t == 0 { 0.0 } else { keep[t * n + r / hidden] };
+                a.h_in[s + r] = if t == 0 { 0.0 } else { a.h_out[s - m + r] * k };
+                a.c_in[s + r] = a.c[r] * k;
+            }
+            cell.forward(
+                &ox[t * n * input..],
+                &a.h_in[s..][..m],
+                &a.c_in[s..][..m],
+                n,
+                &ow_ih_t,
+                &ow_hh_t,
+                &bias,
+                &mut a.gates[t * n * g4..],
+                &mut a.c,
+                &mut a.tanh_c[s..],
+                &mut a.h_out[s..],
+            );
+            heads.forward(
+                &a.h_out[s..],
+                n,
+                &ow_pi_t,
+                &ob_pi,
+                &ow_v,
+                ob_v,
+                &mut a.logits[t * n * actions..],
+                &mut a.values[t * n..],
+            );
+        }
+    };
+    let mut acts = new_acts();
+    forward(&mut acts);
+    let acts = acts;
+    let heads_backward = || {
+        let (mut dw_pi, mut db_pi) = (vec![0f32; ow_pi.len()], vec![0f32; actions]);
+        let (mut dw_v, mut db_v) = (vec![0f32; hidden], 0f32);
+        let mut dh_all = vec![0f32; rows * hidden];
+        heads.backward(
+            &acts.h_out,
+            rows,
+            &ow_pi,
+            &ow_v,
+            &odl,
+            &odv,
+            &mut dw_pi,
+            &mut db_pi,
+            &mut dw_v,
+            &mut db_v,
+            &mut dh_all,
+        );
+        dh_all
+    };
+    let through_time = |dh_all: &[f32]| {
+        let m = n * hidden;
+        let mut dz = vec![0f32; rows * g4];
+        let (mut dh, mut dc, mut dh_in) = (vec![0f32; m], vec![0f32; m], vec![0f32; m]);
+        for t in (0..steps).rev() {
+            let s = t * m;
+            for (d, g) in dh.iter_mut().zip(&dh_all[s..][..m]) {
+                *d += g;
+            }
+            let act = StepActivations {
+                gates: &acts.gates[t * n * g4..][..n * g4],
+                c_in: &acts.c_in[s..][..m],
+                tanh_c: &acts.tanh_c[s..][..m],
+            };
+            cell.backward_step(&act, n, &ow_hh, &dh, &mut dc, &mut dz[t * n * g4..], &mut dh_in);
+            for r in 0..m {
+                let k = keep[t * n + r / hidden];
+                dh[r] = dh_in[r] * k;
+                dc[r] *= k;
+            }
+        }
+        dz
+    };
+    let weights = |dz: &[f32]| {
+        let (mut dw_ih, mut dw_hh) = (vec![0f32; ow_ih.len()], vec![0f32; ow_hh.len()]);
+        let (mut db, mut dx) = (vec![0f32; g4], vec![0f32; rows * input]);
+        cell.weight_gradients(
+            dz, &ox, &acts.h_in, rows, &ow_ih, &mut dw_ih, &mut dw_hh, &mut db, &mut dx,
+        );
+        std::hint::black_box((dw_ih, dw_hh, db, dx));
+    };
+    let dh_all = heads_backward();
+    let dz = through_time(&dh_all);
+    let tch_run = || {
+        let zeros = || Tensor::zeros([n as i64, hi], opts);
+        let (mut h, mut c) = (zeros(), zeros());
+        let mut terms = Vec::with_capacity(steps);
+        for t in 0..steps as i64 {
+            let k = keep_t.get(t);
+            let (hn, cn) = x_leaf.get(t).lstm_cell(
+                &[&(&h * &k), &(&c * &k)],
+                &w_ih,
+                &w_hh,
+                Some(&b_ih),
+                Some(&b_hh),
+            );
+            let lg = hn.linear(&w_pi, Some(&b_pi));
+            let v = hn.linear(&w_v, Some(&b_v)).squeeze_dim(-1);
+            terms.push((lg * dl.get(t)).sum(Kind::Float) + (v * dv.get(t)).sum(Kind::Float));
+            h = hn;
+            c = cn;
+        }
+        let loss = Tensor::stack(&terms, 0).sum(Kind::Float);
+        let leaves = [&w_ih, &w_hh, &b_ih, &b_hh, &w_pi, &b_pi, &w_v, &b_v, &x_leaf];
+        std::hint::black_box(Tensor::run_backward(&[loss], &leaves, false, false));
+    };
+    let (mut scratch, mut scratch2) = (new_acts(), new_acts());
+    let mut runs: Vec<Run<'_>> = vec![
+        Box::new(tch_run),
+        Box::new(|| {
+            forward(&mut scratch);
+            weights(&through_time(&heads_backward()));
+        }),
+        Box::new(|| forward(&mut scratch2)),
+        Box::new(|| std::mem::drop(through_time(&dh_all))),
+        Box::new(|| weights(&dz)),
+        Box::new(|| std::mem::drop(heads_backward())),
+    ];
+    let ms: Vec<f64> = alternate(&mut runs, seconds)
+        .into_iter()
+        .map(|r| 1e3 / r)
+        .collect();
+    println!(
+        "{:>8} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>9.2}×",
+        format!("{steps}×{batch}"),
+        ms[0],
+        ms[1],
+        ms[2],
+        ms[3],
+        ms[4],
+        ms[5],
+        ms[0] / ms[1]
+    );
+}
+
 fn main() {
     let args: Vec<String> = std::env::args()
         .skip(1)
@@ -250,6 +450,10 @@ fn main() {
     tch::set_num_threads(threads);
     learner::a2c::gemm::set_threads(threads as usize);
     tch::manual_seed(0);
+    if args.get(2).map(String::as_str) == Some("core") {
+        print_core_table(seconds);
+        return;
+    }
     gemm_table(seconds);
     println!();
     let shapes = [("small 13×13", 13, 13), ("medium 25×19", 19, 25)];
@@ -380,4 +584,17 @@ fn main() {
     for (name, h, w) in shapes {
         rollout_tail(name, h, w, 60, 32, seconds);
     }
+    print_core_table(seconds);
+}
+
+/// The LSTM core's table ([`core_rollout`]).
+fn print_core_table(seconds: f64) {
+    println!(
+        "\nLSTM core 128 → 128 + heads over a rollout, forward and backward through time, ms per rollout"
+    );
+    println!(
+        "{:>8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "T×B", "tch", "own", "own fwd", "own bptt", "own dW", "own heads", "tch/own"
+    );
+    core_rollout(60, 32, seconds);
 }

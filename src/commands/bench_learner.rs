@@ -125,7 +125,8 @@ pub struct PhaseShares {
 /// One gradient path's figures in the alternating windows.
 #[derive(Debug, Clone, Serialize)]
 pub struct NamedPath {
-    /// `GradPath::name` (`per-step`, `rust-encoder`, `plain`, `recompute`).
+    /// `GradPath::name` (`per-step`, `rust-encoder`, `rust-core`, `plain`,
+    /// `recompute`).
     pub path: String,
     /// Whether it is the fast path (the learners' default).
     pub fast: bool,
@@ -301,11 +302,17 @@ fn fast_path() -> GradPath {
     GradPath::default()
 }
 
-/// The paths measured: the fast one, then the per-step tch path and the
-/// own-kernel encoder where the fast one is neither, then the plain path.
+/// The paths measured: the fast one, then the per-step tch path, the
+/// own-kernel encoder and the own-kernel network where the fast one is
+/// none of them, then the plain path.
 fn measured_paths() -> Vec<GradPath> {
     let mut paths = vec![fast_path()];
-    for p in [GradPath::PerStep, GradPath::RustEncoder, GradPath::Plain] {
+    for p in [
+        GradPath::PerStep,
+        GradPath::RustEncoder,
+        GradPath::RustCore,
+        GradPath::Plain,
+    ] {
         if !paths.contains(&p) {
             paths.push(p);
         }

@@ -40,6 +40,8 @@ pub struct RustEncoder {
     /// channels-last order of the second convolution's output (tch
     /// flattens `[c2, h', w']`), and bias.
     wf: Vec<f32>,
+    /// `wf` transposed (the forward's).
+    wf_t: Vec<f32>,
     bf: Vec<f32>,
     /// Column `k` of `wf` is column `fc_columns[k]` of tch's weight.
     fc_columns: Vec<usize>,
@@ -91,6 +93,7 @@ impl RustEncoder {
             w2: Vec::new(),
             b2: Vec::new(),
             wf: Vec::new(),
+            wf_t: Vec::new(),
             bf: Vec::new(),
             fc_columns,
             inputs: CellInput::new(
@@ -126,6 +129,7 @@ impl RustEncoder {
                 *dst = torch[src];
             }
         }
+        self.wf_t = super::gemm::transposed(&self.wf, hidden, inputs);
         self.bf = bf;
         self.inputs.clear();
         self.y1.clear();
@@ -146,6 +150,13 @@ impl RustEncoder {
     /// The features `[n, hidden]` of the `n` observations of `input`
     /// (no autograd graph), their activations kept for [`Self::backward`].
     pub fn forward(&mut self, input: &CellInput) -> Tensor {
+        let n = input.len() as i64;
+        Tensor::from_slice(self.encode(input)).view([n, self.fc.outputs as i64])
+    }
+
+    /// [`Self::forward`] as floats: the features `[n, hidden]` of the `n`
+    /// observations of `input`, row-major.
+    pub fn encode(&mut self, input: &CellInput) -> &[f32] {
         let n = input.len();
         let first = self.inputs.len();
         self.inputs.extend_from(input);
@@ -176,11 +187,22 @@ impl RustEncoder {
         self.fc.forward(
             &self.y2[s2..],
             n,
-            &self.wf,
+            &self.wf_t,
             &self.bf,
             &mut self.features[sf..],
         );
-        Tensor::from_slice(&self.features[sf..]).view([n as i64, self.fc.outputs as i64])
+        &self.features[sf..]
+    }
+
+    /// The features of every observation encoded since [`Self::load`],
+    /// `[N, hidden]` row-major.
+    pub fn features(&self) -> &[f32] {
+        &self.features
+    }
+
+    /// Width of the features.
+    pub fn width(&self) -> usize {
+        self.fc.outputs
     }
 
     /// The backward pass over every observation encoded since

@@ -16,17 +16,23 @@ pub enum GradPath {
     /// The encoder in the own kernels, its features a leaf of every step's
     /// graph (the core and heads), its backward once over the rollout.
     RustEncoder,
+    /// The whole network (encoder, LSTM core, heads) in the own kernels,
+    /// no autograd graph while acting; tch computes the loss over the
+    /// rollout's logits and values, the own kernels the rest of the
+    /// backward, through time.
+    RustCore,
 }
 
 impl GradPath {
     /// The path named `name` (`recompute`, `per-step`, `plain`,
-    /// `rust-encoder`).
+    /// `rust-encoder`, `rust-core`).
     pub fn from_name(name: &str) -> Option<GradPath> {
         Some(match name {
             "recompute" => GradPath::Recompute,
             "per-step" => GradPath::PerStep,
             "plain" => GradPath::Plain,
             "rust-encoder" => GradPath::RustEncoder,
+            "rust-core" => GradPath::RustCore,
             _ => return None,
         })
     }
@@ -38,6 +44,7 @@ impl GradPath {
             GradPath::PerStep => "per-step",
             GradPath::Plain => "plain",
             GradPath::RustEncoder => "rust-encoder",
+            GradPath::RustCore => "rust-core",
         }
     }
 }

@@ -34,7 +34,7 @@ const CHUNK_ROWS: usize = 1024;
 /// for. What `f` calls must inline into it (`#[inline(always)]`) to share
 /// the instruction set.
 #[inline(always)]
-fn vectorized<R>(f: impl FnOnce() -> R) -> R {
+pub(crate) fn vectorized<R>(f: impl FnOnce() -> R) -> R {
     struct Op<F>(F);
     impl<R, F: FnOnce() -> R> pulp::WithSimd for Op<F> {
         type Output = R;
@@ -462,7 +462,12 @@ impl StridedConv {
                 let (ho, wo) = self.out_hw();
                 let (k, cout) = (TAPS * self.cin, self.cout);
                 relu_backward(&mut dy[..n * self.out_len()], y, dbias);
-                let wm = Mat::rows(weight, k, cout);
+                // `Wᵀ` row-major: the input gradient's product runs faster
+                // with its right operand so ([`super::gemm::transposed`]).
+                let weight_t = dx
+                    .is_some()
+                    .then(|| super::gemm::transposed(weight, k, cout))
+                    .unwrap_or_default();
                 let chunk = self.chunk();
                 scratch.resize(2 * chunk * ho * wo * k, 0.0);
                 let (cols_buf, dcols_buf) = scratch.split_at_mut(chunk * ho * wo * k);
@@ -477,7 +482,7 @@ impl StridedConv {
                     matmul(dweight, Mat::rows(cols, rows, k).t(), dz, true);
                     if let Some(dx) = dx.as_deref_mut() {
                         let dcols = &mut dcols_buf[..rows * k];
-                        matmul(dcols, dz, wm.t(), false);
+                        matmul(dcols, dz, Mat::rows(&weight_t, cout, k), false);
                         self.col2im_add(dcols, m, &mut dx[start * self.in_len()..]);
                     }
                     start += m;
@@ -499,14 +504,15 @@ pub struct DenseRelu {
 }
 
 impl DenseRelu {
-    /// `y = relu(x · Wᵀ + b)` for `n` rows.
-    pub fn forward(&self, x: &[f32], n: usize, weight: &[f32], bias: &[f32], y: &mut [f32]) {
+    /// `y = relu(x · Wᵀ + b)` for `n` rows, from `weight_t`, the weight
+    /// `W` transposed (`[inputs, outputs]`, [`super::gemm::transposed`]).
+    pub fn forward(&self, x: &[f32], n: usize, weight_t: &[f32], bias: &[f32], y: &mut [f32]) {
         vectorized(
             #[inline(always)]
             || {
                 let (k, o) = (self.inputs, self.outputs);
                 let out = &mut y[..n * o];
-                matmul(out, Mat::rows(x, n, k), Mat::rows(weight, o, k).t(), false);
+                matmul(out, Mat::rows(x, n, k), Mat::rows(weight_t, k, o), false);
                 bias_relu(out, bias);
             },
         )
@@ -747,7 +753,8 @@ mod tests {
             (&yt * &ut).sum(Kind::Float).backward();
 
             let mut y = vec![0f32; n * o];
-            layer.forward(&x, n, &weight, &bias, &mut y);
+            let weight_t = crate::a2c::gemm::transposed(&weight, o, k);
+            layer.forward(&x, n, &weight_t, &bias, &mut y);
             let mut dy = upstream.clone();
             let (mut dw, mut db, mut dx) = (vec![0f32; o * k], vec![0f32; o], vec![0f32; n * k]);
             layer.backward(&x, n, &weight, &y, &mut dy, &mut dw, &mut db, Some(&mut dx));

@@ -31,9 +31,11 @@ pub mod gemm;
 mod grad_path;
 pub mod input;
 pub mod kernels;
+pub mod lstm;
 pub mod net;
 pub mod optim;
 pub mod rollout;
+pub mod rust_net;
 
 use std::time::Instant;
 

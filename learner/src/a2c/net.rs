@@ -503,7 +503,7 @@ pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: GradPath) -> f6
             let fwd = 2.0 * (c1 + rest + heads);
             2.0 * fwd + 2.0 * c1 + 4.0 * (rest + heads)
         }
-        GradPath::PerStep | GradPath::RustEncoder => {
+        GradPath::PerStep | GradPath::RustEncoder | GradPath::RustCore => {
             let (c1, rest) = trunk_macs(trunk, Some(10.0));
             let fwd = 2.0 * (c1 + rest + heads);
             fwd + 2.0 * c1 + 4.0 * (rest + heads)

@@ -17,12 +17,16 @@
 //!   update back-propagates through those graphs;
 //! - [`GradPath::Plain`]: the same with the dense first convolution over
 //!   one-hot planes (the benchmark's baseline);
-//! - [`GradPath::RustEncoder`] (the default): the encoder in the project's
-//!   own kernels outside the graph, each step's features a leaf of its
-//!   graph (the core and heads), the encoder's backward run once over the
-//!   whole rollout ([`crate::a2c::encoder`]).
+//! - [`GradPath::RustEncoder`] (the default): the encoder in the project's own kernels
+//!   outside the graph, each step's features a leaf of its graph (the core
+//!   and heads), the encoder's backward run once over the whole rollout
+//!   ([`crate::a2c::encoder`]);
+//! - [`GradPath::RustCore`]: the whole network in the own
+//!   kernels, no graph while acting; the loss in tch over the rollout's
+//!   logits and values, the rest of the backward (through time) in the own
+//!   kernels ([`crate::a2c::rust_net`]).
 //!
-//! All four give the same loss and gradients for the same rollout (tests
+//! All five give the same loss and gradients for the same rollout (tests
 //! check it). Which is fastest is measured by `worldgraph bench learner`:
 //! with these small networks on a CPU the update is compute-bound, so the
 //! recomputation's second forward pass costs more than batching saves,
@@ -35,6 +39,7 @@ use super::encoder::{RustEncoder, with_gradients};
 pub use super::grad_path::GradPath;
 use super::input::{CellInput, GoalMarks, encode_obs, goal_planes};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
+use super::rust_net::RustActorCritic;
 use super::{A2cConfig, Categorical, LossFigures, PhaseTimes, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
 
@@ -52,7 +57,10 @@ pub struct Rollout {
     /// path; behind a lock because [`Self::loss`] runs its backward
     /// through `&self`).
     encoder: std::sync::Mutex<Option<RustEncoder>>,
-    /// Whether the encoder's weights are to be re-read before the next
+    /// The whole network in the own kernels and its activations (rust-core
+    /// path; locked for the same reason).
+    own_net: std::sync::Mutex<Option<RustActorCritic>>,
+    /// Whether the encoder's (or the own network's) weights are to be re-read before the next
     /// step (set by [`Self::start`]: an update may have changed them).
     encoder_stale: bool,
     /// Every step's features, the leaves of its graph (rust-encoder path).
@@ -95,6 +103,7 @@ impl Rollout {
             graph_logits: Vec::new(),
             graph_values: Vec::new(),
             encoder: std::sync::Mutex::new(None),
+            own_net: std::sync::Mutex::new(None),
             encoder_stale: true,
             leaves: Vec::new(),
             actions: Vec::new(),
@@ -181,6 +190,29 @@ impl Rollout {
                 self.leaves.push(features);
                 self.keep_graph(out, t1)
             }
+            GradPath::RustCore => {
+                let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
+                input.push_obs(obs, goals);
+                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
+                let slot = self
+                    .own_net
+                    .get_mut()
+                    .unwrap_or_else(|poisoned| poisoned.into_inner());
+                let own = match slot {
+                    Some(own) => {
+                        if self.encoder_stale {
+                            own.load(net);
+                        }
+                        own
+                    }
+                    None => slot.insert(RustActorCritic::new(net)),
+                };
+                self.encoder_stale = false;
+                let out = own.step(&input, state);
+                self.values.extend(floats(&out.value));
+                PhaseTimes::lap(&mut self.times.act, t1);
+                out
+            }
             GradPath::PerStep | GradPath::Plain => {
                 let (x, input) = if self.path == GradPath::Plain {
                     (Some(encode_obs(obs, goals)), None)
@@ -256,6 +288,21 @@ impl Rollout {
                 Tensor::cat(&self.graph_logits, 0),
                 Tensor::cat(&self.graph_values, 0),
             ),
+            GradPath::RustCore => {
+                let slot = self
+                    .own_net
+                    .lock()
+                    .unwrap_or_else(|poisoned| poisoned.into_inner());
+                let own = slot
+                    .as_ref()
+                    .expect("invariant: the rust-core path ran the rollout's steps");
+                (
+                    Tensor::from_slice(own.logits())
+                        .view([steps * b, -1])
+                        .set_requires_grad(true),
+                    Tensor::from_slice(&self.values).set_requires_grad(true),
+                )
+            }
         };
         let gamma = cfg.gamma as f32;
         let discounts: Vec<f32> = self.dones.iter().map(|&d| gamma * (1.0 - d)).collect();
@@ -275,6 +322,17 @@ impl Rollout {
         let (loss, figures) = a2c_loss(&terms, &adv, &ret, &self.weights, cfg);
         if self.path == GradPath::RustEncoder {
             return (self.encoder_backward(net, &loss), figures);
+        }
+        if self.path == GradPath::RustCore {
+            let mut slot = self
+                .own_net
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            let own = slot
+                .as_mut()
+                .expect("invariant: the rust-core path ran the rollout's steps");
+            let loss = super::rust_net::backward(own, net, &loss, &logits, &values);
+            return (loss, figures);
         }
         (loss, figures)
     }
@@ -579,24 +637,26 @@ mod tests {
     }
 
     #[test]
-    fn the_rust_encoder_gives_the_per_step_loss_and_gradients_on_a_simulator_rollout() {
+    fn the_own_kernels_give_the_per_step_loss_and_gradients_on_a_simulator_rollout() {
         for maze in [Maze::Small, Maze::Medium] {
             let layout = maze.layout(false);
             let vs = nn::VarStore::new(tch::Device::Cpu);
             let net = default_net(&vs, 1, layout.width, layout.height);
             let run = |path| loss_and_gradients(&fill(path, &net, &layout, 20, 9), &net, &vs);
             let per_step = run(GradPath::PerStep);
-            let rust = run(GradPath::RustEncoder);
             assert!(
                 per_step.1.entries < 100.0,
                 "some steps are left out by weight 0"
             );
-            assert_same_function(&format!("{maze:?}"), &rust, &per_step);
+            for path in [GradPath::RustEncoder, GradPath::RustCore] {
+                let what = format!("{maze:?}, {}", path.name());
+                assert_same_function(&what, &run(path), &per_step);
+            }
         }
     }
 
     #[test]
-    fn the_rust_encoder_gives_the_per_step_loss_and_gradients_on_random_inputs() {
+    fn the_own_kernels_give_the_per_step_loss_and_gradients_on_random_inputs() {
         // Random grids (any cell code), agents anywhere facing anywhere,
         // keys carried or not, two goal slots (one sometimes empty or on
         // the agent's cell), random rewards and episode ends.
@@ -637,16 +697,18 @@ mod tests {
             loss_and_gradients(&rollout, &net, &vs)
         };
         let per_step = run(GradPath::PerStep);
-        let rust = run(GradPath::RustEncoder);
-        assert_same_function("random inputs", &rust, &per_step);
+        for path in [GradPath::RustEncoder, GradPath::RustCore] {
+            let what = format!("random inputs, {}", path.name());
+            assert_same_function(&what, &run(path), &per_step);
+        }
     }
 
     #[test]
-    fn the_rust_encoder_reads_the_weights_anew_each_rollout() {
+    fn the_own_kernels_read_the_weights_anew_each_rollout() {
         // Two rollouts into one `Rollout` with an optimiser step between
         // them: the second's gradients are those of the updated weights.
         let layout = Maze::Small.layout(false);
-        let results: Vec<_> = [GradPath::PerStep, GradPath::RustEncoder]
+        let results: Vec<_> = [GradPath::PerStep, GradPath::RustEncoder, GradPath::RustCore]
             .into_iter()
             .map(|path| {
                 let vs = nn::VarStore::new(tch::Device::Cpu);
@@ -659,6 +721,7 @@ mod tests {
                 loss_and_gradients(&rollout, &net, &vs)
             })
             .collect();
-        assert_same_function("after an update", &results[1], &results[0]);
+        assert_same_function("after an update, rust-encoder", &results[1], &results[0]);
+        assert_same_function("after an update, rust-core", &results[2], &results[0]);
     }
 }
