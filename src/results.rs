@@ -92,6 +92,18 @@ pub struct RunResult {
     pub jobs: usize,
     /// The commit the binary that ran it was built from ([`build_commit`]).
     pub commit: String,
+    /// The learners' gradient path (`WORLDGRAPH_GRAD_PATH`): the same
+    /// function in another float order, so a rerun reproduces bit for bit
+    /// only on the same path ([`grad_path_before_recorded`] where absent).
+    #[serde(default = "grad_path_before_recorded")]
+    pub grad_path: String,
+}
+
+/// The gradient path of a summary written before summaries recorded it:
+/// `rust-encoder`, the default from `ea285dd` (the own-kernel encoder) until
+/// `rust-core` became it (summaries of earlier commits ran `per-step`).
+pub fn grad_path_before_recorded() -> String {
+    "rust-encoder".to_string()
 }
 
 impl RunResult {
@@ -116,6 +128,9 @@ pub struct DiscoverResult {
     pub summary: serde_json::Value,
     /// The commit the binary that ran it was built from ([`build_commit`]).
     pub commit: String,
+    /// The gradient path `π_g` trained on ([`RunResult::grad_path`]).
+    #[serde(default = "grad_path_before_recorded")]
+    pub grad_path: String,
 }
 
 /// `results/<maze>/<task>/<config>/seed-<n>.json`.

@@ -263,7 +263,9 @@ fn core_rollout(steps: usize, batch: usize, seconds: f64) {
     let (w_pi, b_pi, w_v, b_v) = (leaf(&[ai, hi]), leaf(&[ai]), leaf(&[1, hi]), leaf(&[1]));
     let xs = Tensor::randn([steps as i64, n as i64, input as i64], opts).relu();
     let x_leaf = xs.copy().set_requires_grad(true);
-    let keep: Vec<f32> = (0..rows).map(|k| if k % 17 == 0 { 0.0 } else { 1.0 }).collect();
+    let keep: Vec<f32> = (0..rows)
+        .map(|k| if k % 17 == 0 { 0.0 } else { 1.0 })
+        .collect();
     let keep_t = Tensor::from_slice(&keep).view([steps as i64, n as i64, 1]);
     let dl = Tensor::randn([steps as i64, n as i64, ai], opts);
     let dv = Tensor::randn([steps as i64, n as i64], opts);
@@ -273,7 +275,10 @@ fn core_rollout(steps: usize, batch: usize, seconds: f64) {
     let (ow_ih, ow_hh) = (floats(&w_ih.detach()), floats(&w_hh.detach()));
     let bias = floats(&(&b_ih + &b_hh).detach());
     let (ow_pi, ob_pi) = (floats(&w_pi.detach()), floats(&b_pi.detach()));
-    let (ow_ih_t, ow_hh_t) = (transposed(&ow_ih, g4, input), transposed(&ow_hh, g4, hidden));
+    let (ow_ih_t, ow_hh_t) = (
+        transposed(&ow_ih, g4, input),
+        transposed(&ow_hh, g4, hidden),
+    );
     let ow_pi_t = transposed(&ow_pi, actions, hidden);
     let (ow_v, ob_v) = (floats(&w_v.detach()), floats(&b_v.detach())[0]);
     let (ox, odl, odv) = (floats(&xs), floats(&dl), floats(&dv));
@@ -304,7 +309,11 @@ fn core_rollout(steps: usize, batch: usize, seconds: f64) {
         for t in 0..steps {
             let (s, m) = (t * n * hidden, n * hidden);
             for r in 0..m {
-                let k = if t == 0 { 0.0 } else { keep[t * n + r / hidden] };
+                let k = if t == 0 {
+                    0.0
+                } else {
+                    keep[t * n + r / hidden]
+                };
                 a.h_in[s + r] = if t == 0 { 0.0 } else { a.h_out[s - m + r] * k };
                 a.c_in[s + r] = a.c[r] * k;
             }
@@ -369,7 +378,15 @@ fn core_rollout(steps: usize, batch: usize, seconds: f64) {
                 c_in: &acts.c_in[s..][..m],
                 tanh_c: &acts.tanh_c[s..][..m],
             };
-            cell.backward_step(&act, n, &ow_hh, &dh, &mut dc, &mut dz[t * n * g4..], &mut dh_in);
+            cell.backward_step(
+                &act,
+                n,
+                &ow_hh,
+                &dh,
+                &mut dc,
+                &mut dz[t * n * g4..],
+                &mut dh_in,
+            );
             for r in 0..m {
                 let k = keep[t * n + r / hidden];
                 dh[r] = dh_in[r] * k;
@@ -408,7 +425,9 @@ fn core_rollout(steps: usize, batch: usize, seconds: f64) {
             c = cn;
         }
         let loss = Tensor::stack(&terms, 0).sum(Kind::Float);
-        let leaves = [&w_ih, &w_hh, &b_ih, &b_hh, &w_pi, &b_pi, &w_v, &b_v, &x_leaf];
+        let leaves = [
+            &w_ih, &w_hh, &b_ih, &b_hh, &w_pi, &b_pi, &w_v, &b_v, &x_leaf,
+        ];
         std::hint::black_box(Tensor::run_backward(&[loss], &leaves, false, false));
     };
     let (mut scratch, mut scratch2) = (new_acts(), new_acts());

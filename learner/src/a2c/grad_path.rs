@@ -50,7 +50,7 @@ impl GradPath {
 }
 
 impl Default for GradPath {
-    /// [`GradPath::RustEncoder`] (measured fastest on the A2C baseline and
+    /// [`GradPath::RustCore`] (measured fastest on the A2C baseline and
     /// the Wide-then-Narrow Worker, `worldgraph bench learner`), or the
     /// path `WORLDGRAPH_GRAD_PATH` names (read once per process).
     fn default() -> GradPath {
@@ -59,7 +59,7 @@ impl Default for GradPath {
             std::env::var("WORLDGRAPH_GRAD_PATH")
                 .ok()
                 .and_then(|v| GradPath::from_name(&v))
-                .unwrap_or(GradPath::RustEncoder)
+                .unwrap_or(GradPath::RustCore)
         })
     }
 }

@@ -464,10 +464,11 @@ impl StridedConv {
                 relu_backward(&mut dy[..n * self.out_len()], y, dbias);
                 // `Wᵀ` row-major: the input gradient's product runs faster
                 // with its right operand so ([`super::gemm::transposed`]).
-                let weight_t = dx
-                    .is_some()
-                    .then(|| super::gemm::transposed(weight, k, cout))
-                    .unwrap_or_default();
+                let weight_t = if dx.is_some() {
+                    super::gemm::transposed(weight, k, cout)
+                } else {
+                    Vec::new()
+                };
                 let chunk = self.chunk();
                 scratch.resize(2 * chunk * ho * wo * k, 0.0);
                 let (cols_buf, dcols_buf) = scratch.split_at_mut(chunk * ho * wo * k);

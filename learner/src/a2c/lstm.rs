@@ -23,8 +23,8 @@
 //! the kernels' SIMD dispatch. tch stays the reference: the tests compare
 //! outputs and gradients with tch's `lstm_cell`.
 
-use super::gemm::{Mat, matmul};
 pub use super::gemm::transposed;
+use super::gemm::{Mat, matmul};
 use super::kernels::vectorized;
 
 /// The cell's shape.
@@ -51,11 +51,10 @@ fn exp(x: f32) -> f32 {
     let t = x * LOG2E + MAGIC;
     let n = t - MAGIC;
     let r = x - n * LN2_HI - n * LN2_LO;
-    let p = ((((1.987_569_2e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2)
-        * r
+    let p = ((((1.987_569_2e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
         + 1.666_666_5e-1)
         * r
-        + 5.000_000_1e-1;
+        + 5.0e-1;
     let p = p * r * r + r + 1.0;
     let pow2 = t.to_bits().wrapping_sub(MAGIC.to_bits()).wrapping_add(127) << 23;
     f32::from_bits(pow2) * p
@@ -161,6 +160,7 @@ impl LstmCell {
     /// state the step started from), writes the gradient of the gate
     /// pre-activations into `dz` `[n, 4H]` and of the hidden state the step
     /// started from into `dh_in` `[n, H]`.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward_step(
         &self,
         act: &StepActivations<'_>,
@@ -360,7 +360,10 @@ mod tests {
             let x = k as f32 * 0.02;
             let (e, se) = (exp(x), x.exp());
             assert!(((e - se) / se).abs() < 3e-7, "exp({x}): {e} vs {se}");
-            assert!((sigmoid(x) - 1.0 / (1.0 + (-x).exp())).abs() < 2e-7, "σ({x})");
+            assert!(
+                (sigmoid(x) - 1.0 / (1.0 + (-x).exp())).abs() < 2e-7,
+                "σ({x})"
+            );
             assert!((tanh(x) - x.tanh()).abs() < 3e-7, "tanh({x})");
         }
         assert_eq!(sigmoid(-200.0), 0.0f32.max(sigmoid(-200.0)));
@@ -381,7 +384,10 @@ mod tests {
             let w_ih = rand(&mut rng, g4 * input, 0.2);
             let w_hh = rand(&mut rng, g4 * hidden, 0.2);
             let (b_ih, b_hh) = (rand(&mut rng, g4, 0.5), rand(&mut rng, g4, 0.5));
-            let (w_pi, b_pi) = (rand(&mut rng, actions * hidden, 0.3), rand(&mut rng, actions, 0.3));
+            let (w_pi, b_pi) = (
+                rand(&mut rng, actions * hidden, 0.3),
+                rand(&mut rng, actions, 0.3),
+            );
             let (w_v, b_v) = (rand(&mut rng, hidden, 0.3), 0.7f32);
             let xs = rand(&mut rng, steps * n * input, 2.0);
             let h0 = rand(&mut rng, n * hidden, 1.0);
@@ -449,11 +455,26 @@ mod tests {
             for t in 0..steps {
                 let s = t * n * hidden;
                 for r in 0..n * hidden {
-                    let k = if t == 0 { 1.0 } else { keep[t * n + r / hidden] };
-                    h_in[s + r] = if t == 0 { h0[r] } else { h_out[s - n * hidden + r] * k };
-                    c_in[s + r] = if t == 0 { c0[r] } else { c_out[s - n * hidden + r] * k };
+                    let k = if t == 0 {
+                        1.0
+                    } else {
+                        keep[t * n + r / hidden]
+                    };
+                    h_in[s + r] = if t == 0 {
+                        h0[r]
+                    } else {
+                        h_out[s - n * hidden + r] * k
+                    };
+                    c_in[s + r] = if t == 0 {
+                        c0[r]
+                    } else {
+                        c_out[s - n * hidden + r] * k
+                    };
                 }
-                let (hs, cs) = (h_in[s..][..n * hidden].to_vec(), c_in[s..][..n * hidden].to_vec());
+                let (hs, cs) = (
+                    h_in[s..][..n * hidden].to_vec(),
+                    c_in[s..][..n * hidden].to_vec(),
+                );
                 cell.forward(
                     &xs[t * n * input..],
                     &hs,
@@ -484,8 +505,17 @@ mod tests {
             let (mut dw_v, mut db_v) = (vec![0f32; hidden], 0f32);
             let mut dh_all = vec![0f32; rows * hidden];
             heads.backward(
-                &h_out, rows, &w_pi, &w_v, &dlogits, &dvalues, &mut dw_pi, &mut db_pi,
-                &mut dw_v, &mut db_v, &mut dh_all,
+                &h_out,
+                rows,
+                &w_pi,
+                &w_v,
+                &dlogits,
+                &dvalues,
+                &mut dw_pi,
+                &mut db_pi,
+                &mut dw_v,
+                &mut db_v,
+                &mut dh_all,
             );
             let mut dz = vec![0f32; rows * g4];
             let (mut dh, mut dc) = (vec![0f32; n * hidden], vec![0f32; n * hidden]);
@@ -500,9 +530,21 @@ mod tests {
                     c_in: &c_in[s..][..n * hidden],
                     tanh_c: &tanh_c[s..][..n * hidden],
                 };
-                cell.backward_step(&act, n, &w_hh, &dh, &mut dc, &mut dz[t * n * g4..], &mut dh_in);
+                cell.backward_step(
+                    &act,
+                    n,
+                    &w_hh,
+                    &dh,
+                    &mut dc,
+                    &mut dz[t * n * g4..],
+                    &mut dh_in,
+                );
                 for r in 0..n * hidden {
-                    let k = if t == 0 { 1.0 } else { keep[t * n + r / hidden] };
+                    let k = if t == 0 {
+                        1.0
+                    } else {
+                        keep[t * n + r / hidden]
+                    };
                     dh[r] = dh_in[r] * k;
                     dc[r] *= k;
                 }

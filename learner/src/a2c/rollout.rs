@@ -17,11 +17,11 @@
 //!   update back-propagates through those graphs;
 //! - [`GradPath::Plain`]: the same with the dense first convolution over
 //!   one-hot planes (the benchmark's baseline);
-//! - [`GradPath::RustEncoder`] (the default): the encoder in the project's own kernels
+//! - [`GradPath::RustEncoder`]: the encoder in the project's own kernels
 //!   outside the graph, each step's features a leaf of its graph (the core
 //!   and heads), the encoder's backward run once over the whole rollout
 //!   ([`crate::a2c::encoder`]);
-//! - [`GradPath::RustCore`]: the whole network in the own
+//! - [`GradPath::RustCore`] (the default): the whole network in the own
 //!   kernels, no graph while acting; the loss in tch over the rollout's
 //!   logits and values, the rest of the backward (through time) in the own
 //!   kernels ([`crate::a2c::rust_net`]).

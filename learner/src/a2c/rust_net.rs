@@ -166,9 +166,8 @@ impl RustActorCritic {
         for b in 0..n {
             let continues = !first && {
                 let prev = self.h_out.len() - n * hd + b * hd;
-                let same = |x: &[f32], y: &[f32]| {
-                    x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits())
-                };
+                let same =
+                    |x: &[f32], y: &[f32]| x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits());
                 same(&h[b * hd..][..hd], &self.h_out[prev..][..hd])
                     && same(&c[b * hd..][..hd], &self.c_last[b * hd..][..hd])
             };
@@ -237,7 +236,11 @@ impl RustActorCritic {
     pub fn backward(&mut self, dlogits: &[f32], dvalues: &[f32]) -> Vec<Tensor> {
         let (hd, g4, a) = (self.cell.hidden, 4 * self.cell.hidden, self.heads.actions);
         let (n, rows) = (self.batch, self.continues.len());
-        assert_eq!(dlogits.len(), rows * a, "one logit gradient per step and action");
+        assert_eq!(
+            dlogits.len(),
+            rows * a,
+            "one logit gradient per step and action"
+        );
         assert_eq!(dvalues.len(), rows, "one value gradient per step");
         let (mut dw_pi, mut db_pi) = (vec![0f32; self.w_pi.len()], vec![0f32; a]);
         let (mut dw_v, mut db_v) = (vec![0f32; hd], 0f32);

@@ -23,6 +23,7 @@ use clap::Args;
 use sim::render::write_atomic;
 use sim::{Maze, Task};
 
+use learner::a2c::rollout::GradPath;
 use learner::run::config::TrainConfig;
 use learner::run::protocol::TestSummary;
 mod grid;
@@ -240,6 +241,7 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
                 grid: plan.grid_label.clone(),
                 summary,
                 commit: plan.commit.clone(),
+                grad_path: GradPath::default().name().to_string(),
             };
             let path = discover_path(&plan.results, &spec.maze, spec.seed);
             write_result(&path, &serde_json::to_vec_pretty(&r)?)
@@ -330,6 +332,7 @@ fn run_result(
         torch_threads: plan.threads,
         jobs: plan.jobs,
         commit: plan.commit.clone(),
+        grad_path: GradPath::default().name().to_string(),
     }
 }
 

@@ -96,12 +96,10 @@ pub(super) fn reproduce(
                     spec.rounds
                 );
                 let job = Job::Discover { spec: spec.clone() };
+                let mut cmd = discover_command(&plan, spec)?;
+                cmd.env("WORLDGRAPH_GRAD_PATH", &r.grad_path);
                 wait_ok(
-                    start(
-                        discover_command(&plan, spec)?,
-                        &plan.log_path(&job),
-                        plan.threads,
-                    )?,
+                    start(cmd, &plan.log_path(&job), plan.threads)?,
                     &plan.log_path(&job),
                 )?;
             }
@@ -127,20 +125,21 @@ pub(super) fn reproduce(
         seed: r.seed,
         needs: r.discover.as_ref().map(|_| 0),
     };
+    let mut cmd = train_command(
+        &plan,
+        &r.train_config,
+        maze,
+        task,
+        &r.config,
+        r.seed,
+        graph.as_deref(),
+    )?;
+    // The same function in another float order on another path: the rerun
+    // takes the summary's.
+    cmd.env("WORLDGRAPH_GRAD_PATH", &r.grad_path);
+    eprintln!("reproduce: on the gradient path {}", r.grad_path);
     wait_ok(
-        start(
-            train_command(
-                &plan,
-                &r.train_config,
-                maze,
-                task,
-                &r.config,
-                r.seed,
-                graph.as_deref(),
-            )?,
-            &plan.log_path(&job),
-            plan.threads,
-        )?,
+        start(cmd, &plan.log_path(&job), plan.threads)?,
         &plan.log_path(&job),
     )?;
     let dir = plan.train_dir(maze, task, &r.config, r.seed);
