@@ -553,7 +553,7 @@ impl DenseRelu {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use rand::rngs::SmallRng;
     use rand::{Rng, SeedableRng};
     use tch::{Kind, Tensor};

@@ -335,16 +335,7 @@ mod tests {
 
     use super::*;
 
-    /// Largest absolute difference over the largest magnitude of `b`.
-    fn rel_diff(a: &[f32], b: &[f32]) -> f64 {
-        assert_eq!(a.len(), b.len());
-        let scale = b.iter().fold(0f64, |m, &v| m.max(f64::from(v.abs())));
-        let diff = a
-            .iter()
-            .zip(b)
-            .fold(0f64, |m, (&x, &y)| m.max(f64::from((x - y).abs())));
-        diff / scale.max(1e-6)
-    }
+    use crate::a2c::kernels::tests::rel_diff;
 
     fn floats(t: &Tensor) -> Vec<f32> {
         Vec::<f32>::try_from(&t.contiguous().flatten(0, -1)).expect("floats")

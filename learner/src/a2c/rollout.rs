@@ -171,20 +171,12 @@ impl Rollout {
                 let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
                 input.push_obs(obs, goals);
                 let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
-                let slot = self
-                    .encoder
-                    .get_mut()
-                    .unwrap_or_else(|poisoned| poisoned.into_inner());
-                let encoder = match slot {
-                    Some(e) => {
-                        if self.encoder_stale {
-                            e.load(net.trunk());
-                        }
-                        e
-                    }
-                    None => slot.insert(RustEncoder::new(net.trunk())),
-                };
-                self.encoder_stale = false;
+                let encoder = current(
+                    &mut self.encoder,
+                    std::mem::take(&mut self.encoder_stale),
+                    || RustEncoder::new(net.trunk()),
+                    |e| e.load(net.trunk()),
+                );
                 let features = encoder.forward(&input).set_requires_grad(true);
                 let out = net.step_features(&features, state);
                 self.leaves.push(features);
@@ -194,20 +186,12 @@ impl Rollout {
                 let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
                 input.push_obs(obs, goals);
                 let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
-                let slot = self
-                    .own_net
-                    .get_mut()
-                    .unwrap_or_else(|poisoned| poisoned.into_inner());
-                let own = match slot {
-                    Some(own) => {
-                        if self.encoder_stale {
-                            own.load(net);
-                        }
-                        own
-                    }
-                    None => slot.insert(RustActorCritic::new(net)),
-                };
-                self.encoder_stale = false;
+                let own = current(
+                    &mut self.own_net,
+                    std::mem::take(&mut self.encoder_stale),
+                    || RustActorCritic::new(net),
+                    |own| own.load(net),
+                );
                 let out = own.step(&input, state);
                 self.values.extend(floats(&out.value));
                 PhaseTimes::lap(&mut self.times.act, t1);
@@ -394,6 +378,29 @@ impl Rollout {
         opt.backward_step_clip_norm(&loss, cfg.grad_clip_norm);
         PhaseTimes::lap(&mut self.times.backward, t1);
         figures
+    }
+}
+
+/// The own-kernel network in `slot` with the weights of the network it
+/// mirrors: built by `new` the first time, re-read by `load` when `stale`
+/// (an update may have changed the weights since the last step).
+fn current<'a, T>(
+    slot: &'a mut std::sync::Mutex<Option<T>>,
+    stale: bool,
+    new: impl FnOnce() -> T,
+    load: impl FnOnce(&mut T),
+) -> &'a mut T {
+    let slot = slot
+        .get_mut()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    match slot {
+        Some(own) => {
+            if stale {
+                load(own);
+            }
+            own
+        }
+        None => slot.insert(new()),
     }
 }
 
