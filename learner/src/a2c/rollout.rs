@@ -384,12 +384,12 @@ impl Rollout {
 /// The own-kernel network in `slot` with the weights of the network it
 /// mirrors: built by `new` the first time, re-read by `load` when `stale`
 /// (an update may have changed the weights since the last step).
-fn current<'a, T>(
-    slot: &'a mut std::sync::Mutex<Option<T>>,
+fn current<T>(
+    slot: &mut std::sync::Mutex<Option<T>>,
     stale: bool,
     new: impl FnOnce() -> T,
     load: impl FnOnce(&mut T),
-) -> &'a mut T {
+) -> &mut T {
     let slot = slot
         .get_mut()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
