@@ -76,6 +76,12 @@ pub fn sample_index(rng: &mut impl Rng, probs: &Tensor) -> Vec<usize> {
     let flat: Vec<f32> =
         tch::no_grad(|| Vec::try_from(probs.to_kind(Kind::Float).contiguous().flatten(0, -1)))
             .expect("invariant: probabilities convert to a float vector");
+    sample_rows(rng, &flat, width)
+}
+
+/// [`sample_index`] of probabilities as floats: one draw per `width`-wide
+/// row of `flat`.
+pub fn sample_rows(rng: &mut impl Rng, flat: &[f32], width: usize) -> Vec<usize> {
     flat.chunks_exact(width)
         .map(|p| {
             let u: f32 = rng.random();

@@ -131,6 +131,12 @@ impl RustEncoder {
         }
         self.wf_t = super::gemm::transposed(&self.wf, hidden, inputs);
         self.bf = bf;
+        self.clear();
+    }
+
+    /// Forgets the activations, keeps the weights (an encoder that only
+    /// acts, such as the Manager's between its updates).
+    pub fn clear(&mut self) {
         self.inputs.clear();
         self.y1.clear();
         self.y2.clear();

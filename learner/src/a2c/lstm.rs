@@ -84,6 +84,20 @@ pub struct StepActivations<'a> {
     pub tanh_c: &'a [f32],
 }
 
+/// The activations of a sequence of steps, `[rows, ·]` step-major, for
+/// [`LstmCell::backward_through_time`].
+#[derive(Debug)]
+pub struct Sequence<'a> {
+    /// The activated gates `[rows, 4H]`.
+    pub gates: &'a [f32],
+    /// The cell state each step started from `[rows, H]`.
+    pub c_in: &'a [f32],
+    /// `tanh` of the cell state each step produced `[rows, H]`.
+    pub tanh_c: &'a [f32],
+    /// Whether row `t·n + b`'s state continues step `t − 1`'s output.
+    pub continues: &'a [bool],
+}
+
 impl LstmCell {
     /// One step over `n` rows: the activated gates into `gates` `[n, 4H]`,
     /// the new cell state into `c_out`, `tanh` of it into `tanh_c` and the
@@ -206,6 +220,57 @@ impl LstmCell {
                 );
             },
         )
+    }
+
+    /// The backward pass through time over the `rows / n` steps of `n`
+    /// rows each whose activations `seq` holds (step-major, `[rows, ·]`):
+    /// from the gradient `dh_out` `[rows, H]` each step's hidden output
+    /// receives from outside the core (the heads), writes the gradient of
+    /// every step's gate pre-activations into `dz` `[rows, 4H]` (what
+    /// [`Self::weight_gradients`] reads). A row whose state does not
+    /// continue the previous step's output (`seq.continues` false: a reset,
+    /// or the sequence's first step) passes no gradient back.
+    pub fn backward_through_time(
+        &self,
+        n: usize,
+        w_hh: &[f32],
+        seq: &Sequence<'_>,
+        dh_out: &[f32],
+        dz: &mut [f32],
+    ) {
+        let (hd, g4) = (self.hidden, 4 * self.hidden);
+        let steps = seq.continues.len() / n.max(1);
+        let (mut dh, mut dc) = (vec![0f32; n * hd], vec![0f32; n * hd]);
+        let mut dh_in = vec![0f32; n * hd];
+        for t in (0..steps).rev() {
+            let s = t * n * hd;
+            for (d, g) in dh.iter_mut().zip(&dh_out[s..][..n * hd]) {
+                *d += g;
+            }
+            let act = StepActivations {
+                gates: &seq.gates[t * n * g4..][..n * g4],
+                c_in: &seq.c_in[s..][..n * hd],
+                tanh_c: &seq.tanh_c[s..][..n * hd],
+            };
+            self.backward_step(
+                &act,
+                n,
+                w_hh,
+                &dh,
+                &mut dc,
+                &mut dz[t * n * g4..],
+                &mut dh_in,
+            );
+            for b in 0..n {
+                let row = b * hd..(b + 1) * hd;
+                if seq.continues[t * n + b] {
+                    dh[row.clone()].copy_from_slice(&dh_in[row]);
+                } else {
+                    dh[row.clone()].fill(0.0);
+                    dc[row].fill(0.0);
+                }
+            }
+        }
     }
 
     /// The gradients over all `rows` steps of a rollout from their gate

@@ -28,7 +28,7 @@ use tch::Tensor;
 
 use super::encoder::{RustEncoder, with_gradients};
 use super::input::CellInput;
-use super::lstm::{Heads, LstmCell, StepActivations, transposed};
+use super::lstm::{Heads, LstmCell, Sequence, transposed};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
 use super::rollout::floats;
 
@@ -258,40 +258,15 @@ impl RustActorCritic {
             &mut db_v,
             &mut dh_out,
         );
-        // Through time: the hidden output's gradient is the heads' plus
-        // what the next step's state passes back.
         let mut dz = vec![0f32; rows * g4];
-        let (mut dh, mut dc) = (vec![0f32; n * hd], vec![0f32; n * hd]);
-        let mut dh_in = vec![0f32; n * hd];
-        for t in (0..self.steps()).rev() {
-            let s = t * n * hd;
-            for (d, g) in dh.iter_mut().zip(&dh_out[s..][..n * hd]) {
-                *d += g;
-            }
-            let act = StepActivations {
-                gates: &self.gates[t * n * g4..][..n * g4],
-                c_in: &self.c_in[s..][..n * hd],
-                tanh_c: &self.tanh_c[s..][..n * hd],
-            };
-            self.cell.backward_step(
-                &act,
-                n,
-                &self.w_hh,
-                &dh,
-                &mut dc,
-                &mut dz[t * n * g4..],
-                &mut dh_in,
-            );
-            for b in 0..n {
-                let row = b * hd..(b + 1) * hd;
-                if self.continues[t * n + b] {
-                    dh[row.clone()].copy_from_slice(&dh_in[row]);
-                } else {
-                    dh[row.clone()].fill(0.0);
-                    dc[row].fill(0.0);
-                }
-            }
-        }
+        let seq = Sequence {
+            gates: &self.gates,
+            c_in: &self.c_in,
+            tanh_c: &self.tanh_c,
+            continues: &self.continues,
+        };
+        self.cell
+            .backward_through_time(n, &self.w_hh, &seq, &dh_out, &mut dz);
         let (mut dw_ih, mut dw_hh) = (vec![0f32; self.w_ih.len()], vec![0f32; self.w_hh.len()]);
         let (mut dbias, mut dx) = (vec![0f32; g4], vec![0f32; rows * hd]);
         self.cell.weight_gradients(

@@ -157,6 +157,9 @@ impl HrlAgent {
     /// (the benchmark's plain path is [`GradPath::PerStep`]).
     pub fn set_grad_path(&mut self, path: GradPath) {
         self.worker.set_grad_path(path, self.cfg.envs);
+        if let Some(m) = self.manager.as_mut() {
+            m.set_grad_path(path);
+        }
     }
 
     /// A controller of `n` environments at the start of their episodes,
@@ -347,6 +350,7 @@ impl HrlAgent {
         self.worker.opt.load_state(&strip("worker-")).map_err(bad)?;
         if let Some(m) = self.manager.as_mut() {
             m.opt.load_state(&strip("manager-")).map_err(bad)?;
+            m.weights_changed();
         }
         if let Some(s) = self.traverser.steering_mut() {
             s.optimiser_mut().load_state(&strip("pi_g-")).map_err(bad)?;

@@ -28,7 +28,9 @@
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
+use super::manager_kernels::OwnManager;
 use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead, Window};
+use crate::a2c::encoder::with_gradients;
 use crate::a2c::input::CellInput;
 use crate::a2c::net::{LstmState, Trunk};
 use crate::a2c::rollout::floats;
@@ -201,6 +203,25 @@ impl GoalMap {
         self
     }
 
+    /// The two convolutions, the cells `π^ω` (or FN's head) reads and, with
+    /// windows, every candidate's window cells and valid slots (`[|V|,
+    /// N·N]` each): what [`super::manager_kernels`] runs.
+    pub(super) fn parts(
+        &self,
+    ) -> (
+        &nn::Conv2D,
+        &nn::Conv2D,
+        Option<&Tensor>,
+        Option<[&Tensor; 2]>,
+    ) {
+        (
+            &self.conv1,
+            &self.conv2,
+            self.cells.as_ref(),
+            self.windows.as_ref().map(|w| [&w.cells, &w.valid]),
+        )
+    }
+
     /// The logits `[N, cells]` of the observations `input`.
     pub fn logits(&self, input: &CellInput) -> Tensor {
         self.logits_dense(&input.to_dense())
@@ -339,6 +360,46 @@ impl Manager {
         &self.head
     }
 
+    /// Every weight outside the trunk: the value head's, the goal head's
+    /// and the goal map's.
+    pub(super) fn head_parameters(&self) -> Vec<Tensor> {
+        let linear = |l: &nn::Linear| {
+            std::iter::once(l.ws.shallow_clone())
+                .chain(l.bs.as_ref().map(Tensor::shallow_clone))
+                .collect::<Vec<_>>()
+        };
+        let conv = |c: &nn::Conv2D| {
+            std::iter::once(c.ws.shallow_clone())
+                .chain(c.bs.as_ref().map(Tensor::shallow_clone))
+                .collect::<Vec<_>>()
+        };
+        let mut params = linear(&self.value);
+        match &self.head {
+            ManagerHead::Feudal { cells, .. } => params.extend(linear(cells)),
+            ManagerHead::WideNarrow(head) => {
+                head.layers()
+                    .into_iter()
+                    .for_each(|l| params.extend(linear(l)));
+            }
+        }
+        if let Some(map) = &self.goal_map {
+            let (conv1, conv2, _, _) = map.parts();
+            params.extend(conv(conv1));
+            params.extend(conv(conv2));
+        }
+        params
+    }
+
+    /// The value head.
+    pub(super) fn value_head(&self) -> &nn::Linear {
+        &self.value
+    }
+
+    /// The goal map, if the Manager has one.
+    pub(super) fn goal_map(&self) -> Option<&GoalMap> {
+        self.goal_map.as_ref()
+    }
+
     /// Zero core state.
     pub fn zero_state(&self, batch: i64) -> LstmState {
         self.trunk.zero_state(batch)
@@ -398,6 +459,22 @@ impl Manager {
         init: &LstmState,
         cfg: &A2cConfig,
         gamma: f64,
+    ) -> ManagerLoss {
+        self.loss_with(queues, init, cfg, gamma, None)
+    }
+
+    /// [`Self::loss`], the trunk run by the own kernels when `own` is given
+    /// (the [`crate::a2c::rollout::GradPath::RustCore`] path): its forward
+    /// and backward outside tch's autograd, the heads, the goal map and the
+    /// loss in tch; the returned loss hands the trunk's gradients to the
+    /// optimiser ([`with_gradients`]).
+    pub(super) fn loss_with(
+        &self,
+        queues: &[DecisionQueue],
+        init: &LstmState,
+        cfg: &A2cConfig,
+        gamma: f64,
+        mut own: Option<&mut OwnManager>,
     ) -> ManagerLoss {
         let b = queues.len();
         let k_max = queues
@@ -463,11 +540,31 @@ impl Manager {
             }
         }
         let (k, bb) = (k_max as i64, b as i64);
-        let features = self.trunk.features(&input).view([k, bb, -1]);
-        let (hs, cs) =
-            self.trunk
-                .unroll_states(&features, init, &Tensor::from_slice(&reset).view([k, bb]));
-        let h = hs.view([k * bb, self.hidden]);
+        let (hs, cs, h) = match own.as_deref_mut() {
+            Some(own) => {
+                let resets: Vec<bool> = reset.iter().map(|&r| r > 0.5).collect();
+                let (hs, cs) = own.unroll(&input, &floats(&init.h), &floats(&init.c), &resets, b);
+                let shape = [k, bb, self.hidden];
+                let h = Tensor::from_slice(&hs)
+                    .view([k * bb, self.hidden])
+                    .set_requires_grad(true);
+                (
+                    h.detach().view(shape),
+                    Tensor::from_slice(&cs).view(shape),
+                    h,
+                )
+            }
+            None => {
+                let features = self.trunk.features(&input).view([k, bb, -1]);
+                let (hs, cs) = self.trunk.unroll_states(
+                    &features,
+                    init,
+                    &Tensor::from_slice(&reset).view([k, bb]),
+                );
+                let h = hs.view([k * bb, self.hidden]);
+                (hs, cs, h)
+            }
+        };
         let value = self.value.forward(&h).squeeze_dim(-1);
         let bias = self.goal_bias(&input);
         let (log_prob, entropy) = match &self.head {
@@ -500,6 +597,38 @@ impl Manager {
             value: value.to_kind(Kind::Float),
         };
         let (loss, figures) = a2c_loss(&terms, &adv, &ret, &weights, cfg);
+        let loss = match own {
+            Some(own) if figures.entries > 0.0 => {
+                // One backward through tch's part (heads, goal map) to `h`
+                // and to its own weights; the trunk's gradients from `h`'s.
+                let rest: Vec<Tensor> = self
+                    .head_parameters()
+                    .into_iter()
+                    .filter(Tensor::requires_grad)
+                    .collect();
+                let inputs: Vec<&Tensor> = std::iter::once(&h).chain(&rest).collect();
+                let grads = Tensor::run_backward(&[&loss], &inputs, false, false);
+                let dh = if grads[0].defined() {
+                    floats(&grads[0])
+                } else {
+                    vec![0f32; (k * bb * self.hidden) as usize]
+                };
+                let params: Vec<Tensor> = self
+                    .trunk
+                    .encoder_parameters()
+                    .into_iter()
+                    .chain(self.trunk.core_parameters())
+                    .chain(rest)
+                    .collect();
+                let grads: Vec<Tensor> = own
+                    .unroll_backward(&dh, b)
+                    .into_iter()
+                    .chain(grads[1..].iter().map(Tensor::shallow_clone))
+                    .collect();
+                with_gradients(&loss, &params, &grads)
+            }
+            _ => loss,
+        };
         // The state before each environment's interval under way.
         let mut next_h = Vec::with_capacity(b);
         let mut next_c = Vec::with_capacity(b);

@@ -20,12 +20,14 @@ use tch::{Tensor, nn};
 use super::config::{AgentConfig, AgentKind, Candidates};
 use super::controller::Controller;
 use super::feudal::{Decision, GoalBias, Manager, ManagerHead};
+use super::manager_kernels::{OwnDecision, OwnManager};
 use super::stats::{Decisions, Tracing};
 use super::wide_narrow::{self, WideNarrowHead, Window};
 use super::worker::WorkerGoal;
 use crate::a2c::input::{BASE_CHANNELS, CellInput, mask};
-use crate::a2c::net::Trunk;
+use crate::a2c::net::{LstmState, Trunk};
 use crate::a2c::optim::Adam;
+use crate::a2c::rollout::{GradPath, floats};
 use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
 use crate::batch_env::ObsView;
 
@@ -58,6 +60,89 @@ pub(super) struct ManagerSide {
     pub(super) candidates: Vec<u32>,
     /// The narrow window (WN).
     pub(super) window: Option<Window>,
+    /// Where the decisions run: [`GradPath::RustCore`] in the own kernels
+    /// ([`OwnManager`]), any other path in tch.
+    path: GradPath,
+    /// The own kernels' copy of the network, built at the first decision
+    /// and read again after every update (`None`: not built, or stale).
+    own: std::sync::Mutex<Option<OwnManager>>,
+}
+
+/// Where a batch of decisions draws its goals from: the tch network's
+/// outputs or the own kernels'.
+enum Chooser<'a> {
+    Tch {
+        head: &'a ManagerHead,
+        h: Tensor,
+        bias: Option<GoalBias>,
+    },
+    Own {
+        own: &'a OwnManager,
+        decision: OwnDecision,
+    },
+}
+
+impl Chooser<'_> {
+    /// FN: the subgoal probabilities `[n, H·W]`.
+    fn feudal(&self, net: &Manager) -> Vec<f32> {
+        match self {
+            Chooser::Tch { h, bias, .. } => floats(
+                &net.feudal_policy(h, bias.as_ref().map(|b| &b.wide))
+                    .expect("feudal")
+                    .probs(),
+            ),
+            Chooser::Own { own, decision } => own.feudal_probs(decision),
+        }
+    }
+
+    /// WN: `π^ω`'s probabilities `[n, |V|]`.
+    fn wide(&self) -> Vec<f32> {
+        match self {
+            Chooser::Tch { head, h, bias } => floats(
+                &wn_head(head)
+                    .wide(h, bias.as_ref().map(|b| &b.wide))
+                    .probs(),
+            ),
+            Chooser::Own { own, decision } => own.wide_probs(decision),
+        }
+    }
+
+    /// WN: `π^n`'s probabilities `[n, N·N]` around the wide goals `wide`
+    /// (indices in `V`), from the local inputs and valid slots.
+    fn narrow(&self, wide: &[usize], local: &[f32], valid: &[bool]) -> Vec<f32> {
+        match self {
+            Chooser::Tch { head, h, bias } => {
+                let n = wide.len() as i64;
+                let wide_idx =
+                    Tensor::from_slice(&wide.iter().map(|&k| k as i64).collect::<Vec<_>>());
+                tch::no_grad(|| {
+                    let map = bias
+                        .as_ref()
+                        .and_then(|b| b.windows.as_ref())
+                        .map(|w| WideNarrowHead::narrow_bias(w, &wide_idx));
+                    floats(
+                        &wn_head(head)
+                            .narrow(
+                                h,
+                                &wide_idx,
+                                &Tensor::from_slice(local).view([n, -1]),
+                                &Tensor::from_slice(valid).view([n, -1]),
+                                map.as_ref(),
+                            )
+                            .probs(),
+                    )
+                })
+            }
+            Chooser::Own { own, decision } => own.narrow_probs(decision, wide, local, valid),
+        }
+    }
+}
+
+fn wn_head(head: &ManagerHead) -> &WideNarrowHead {
+    match head {
+        ManagerHead::WideNarrow(h) => h,
+        ManagerHead::Feudal { .. } => panic!("a Feudal Manager has no Wide-then-Narrow head"),
+    }
 }
 
 impl ManagerSide {
@@ -127,6 +212,8 @@ impl ManagerSide {
             opt,
             candidates,
             window,
+            path: GradPath::default(),
+            own: std::sync::Mutex::new(None),
         }
     }
 
@@ -155,24 +242,42 @@ impl ManagerSide {
             input.push_env(obs, e, None);
         }
         let resets: Vec<bool> = who.iter().map(|&e| ctl.envs[e].manager_reset).collect();
-        let state = ctl
-            .manager_state
-            .as_ref()
-            .expect("a Manager has a core state")
-            .select(&idx)
-            .reset_done(&mask(&resets));
-        let step = self.net.act(&input, &state);
-        let bias = tch::no_grad(|| self.net.goal_bias(&input));
-        ctl.manager_state
-            .as_mut()
-            .expect("state")
-            .scatter(&idx, &step.state);
-        let picks = match self.net.head() {
-            ManagerHead::Feudal { .. } => self.pick_feudal(&step.h, bias.as_ref(), &mut ctl.rng),
-            ManagerHead::WideNarrow(head) => {
-                self.pick_wide_narrow(head, &step.h, bias.as_ref(), obs, &who, &mut ctl.rng)
-            }
+        let mut own_net = self.own.lock().expect("invariant: no panic while deciding");
+        let (values, chooser) = if self.path == GradPath::RustCore {
+            let own =
+                own_net.get_or_insert_with(|| OwnManager::new(&self.net, self.width, self.height));
+            let state = ctl
+                .manager_state
+                .as_mut()
+                .expect("a Manager has a core state");
+            let decision = own_step(own, &input, state, &who, &resets);
+            (decision.values.clone(), Chooser::Own { own, decision })
+        } else {
+            let state = ctl
+                .manager_state
+                .as_ref()
+                .expect("a Manager has a core state")
+                .select(&idx)
+                .reset_done(&mask(&resets));
+            let step = self.net.act(&input, &state);
+            let bias = tch::no_grad(|| self.net.goal_bias(&input));
+            ctl.manager_state
+                .as_mut()
+                .expect("state")
+                .scatter(&idx, &step.state);
+            let chooser = Chooser::Tch {
+                head: self.net.head(),
+                h: step.h,
+                bias,
+            };
+            (step.values, chooser)
         };
+        let picks = match self.net.head() {
+            ManagerHead::Feudal { .. } => self.pick_feudal(&chooser, &mut ctl.rng),
+            ManagerHead::WideNarrow(_) => self.pick_wide_narrow(&chooser, obs, &who, &mut ctl.rng),
+        };
+        drop(chooser);
+        drop(own_net);
         for (j, (&e, pick)) in who.iter().zip(picks).enumerate() {
             let c = &mut ctl.envs[e];
             if record {
@@ -184,7 +289,7 @@ impl ManagerSide {
                     narrow: pick.narrow,
                     local: pick.local,
                     valid: pick.valid,
-                    value: step.values[j],
+                    value: values[j],
                     reset_before: c.manager_reset,
                     rewards: Vec::new(),
                     complete: false,
@@ -210,14 +315,11 @@ impl ManagerSide {
         made
     }
 
-    /// FN: a subgoal cell per core output of `h` (section 4.1), drawn from
-    /// the softmax over the valid cells (plus the goal map's `bias`).
-    fn pick_feudal(&self, h: &Tensor, bias: Option<&GoalBias>, rng: &mut ReplayRng) -> Vec<Pick> {
-        let pi = self
-            .net
-            .feudal_policy(h, bias.map(|b| &b.wide))
-            .expect("feudal");
-        crate::seeding::sample_index(rng, &pi.probs())
+    /// FN: a subgoal cell per decision of `chooser` (section 4.1), drawn
+    /// from the softmax over the valid cells (plus the goal map's logits).
+    fn pick_feudal(&self, chooser: &Chooser<'_>, rng: &mut ReplayRng) -> Vec<Pick> {
+        let width = self.width * self.height;
+        crate::seeding::sample_rows(rng, &chooser.feudal(&self.net), width)
             .into_iter()
             .map(|cell| Pick {
                 wide: cell as i64,
@@ -230,22 +332,21 @@ impl ManagerSide {
             .collect()
     }
 
-    /// WN: for the environments `who` of `obs` (core outputs `h`), a wide
-    /// goal `g_w` from `π^ω`, then a narrow goal `g_n` from `π^n` among the
-    /// valid cells of the window around it (section 4.2), each plus the
-    /// goal map's logits `bias` where it reaches them. The agent's own cell is no narrow goal (reaching
-    /// means arriving), unless the window holds nothing else.
+    /// WN: for the environments `who` of `obs` (decisions of `chooser`), a
+    /// wide goal `g_w` from `π^ω`, then a narrow goal `g_n` from `π^n`
+    /// among the valid cells of the window around it (section 4.2), each
+    /// plus the goal map's logits where it reaches them. The agent's own
+    /// cell is no narrow goal (reaching means arriving), unless the window
+    /// holds nothing else.
     fn pick_wide_narrow(
         &self,
-        head: &WideNarrowHead,
-        h: &Tensor,
-        bias: Option<&GoalBias>,
+        chooser: &Chooser<'_>,
         obs: &ObsView<'_>,
         who: &[usize],
         rng: &mut ReplayRng,
     ) -> Vec<Pick> {
         let window = self.window.as_ref().expect("WN has a window");
-        let wide = crate::seeding::sample_index(rng, &head.wide(h, bias.map(|b| &b.wide)).probs());
+        let wide = crate::seeding::sample_rows(rng, &chooser.wide(), self.candidates.len());
         let mut locals = Vec::new();
         let mut valids = Vec::new();
         for (j, &e) in who.iter().enumerate() {
@@ -260,20 +361,11 @@ impl ManagerSide {
             }
             valids.push(valid);
         }
-        let local = Tensor::from_slice(&locals.concat()).view([who.len() as i64, -1]);
-        let valid = Tensor::from_slice(&valids.concat()).view([who.len() as i64, -1]);
-        let wide_idx = Tensor::from_slice(&wide.iter().map(|&k| k as i64).collect::<Vec<_>>());
-        let narrow = tch::no_grad(|| {
-            let map = bias
-                .and_then(|b| b.windows.as_ref())
-                .map(|w| WideNarrowHead::narrow_bias(w, &wide_idx));
-            crate::seeding::sample_index(
-                rng,
-                &head
-                    .narrow(h, &wide_idx, &local, &valid, map.as_ref())
-                    .probs(),
-            )
-        });
+        let narrow = crate::seeding::sample_rows(
+            rng,
+            &chooser.narrow(&wide, &locals.concat(), &valids.concat()),
+            window.len(),
+        );
         (0..who.len())
             .map(|j| {
                 let gw = self.candidates[wide[j]];
@@ -313,10 +405,19 @@ impl ManagerSide {
     ) -> LossFigures {
         let t0 = std::time::Instant::now();
         let init = ctl.manager_init.take().expect("Manager init state");
-        let l = self.net.loss(&ctl.queues, &init, cfg, cfg.gamma);
+        let own_path = self.path == GradPath::RustCore;
+        let own = self.own.get_mut().expect("invariant: not poisoned");
+        let l = self.net.loss_with(
+            &ctl.queues,
+            &init,
+            cfg,
+            cfg.gamma,
+            own.as_mut().filter(|_| own_path),
+        );
         let t1 = PhaseTimes::lap(&mut times.loss, t0);
         if l.figures.entries > 0.0 {
             self.opt.backward_step(&l.loss, cfg.grad_clip_norm);
+            self.weights_changed();
         }
         PhaseTimes::lap(&mut times.backward, t1);
         ctl.manager_init = Some(l.next_init);
@@ -326,6 +427,26 @@ impl ManagerSide {
             q.decisions.extend(last);
         }
         l.figures
+    }
+
+    /// Runs the decisions on gradient path `path` (module docs of
+    /// [`super::manager_kernels`]).
+    pub(super) fn set_grad_path(&mut self, path: GradPath) {
+        self.path = path;
+        self.weights_changed();
+    }
+
+    /// The weights changed (an update, a checkpoint restored): the own
+    /// kernels read them again at the next decision.
+    pub(super) fn weights_changed(&mut self) {
+        if let Some(own) = self
+            .own
+            .get_mut()
+            .expect("invariant: not poisoned")
+            .as_mut()
+        {
+            own.load(&self.net);
+        }
     }
 
     /// Model FLOPs of one decision: the Manager's forward and backward.
@@ -342,4 +463,35 @@ fn valid_cells(layout: &Layout) -> Vec<bool> {
         v[c.index()] = true;
     }
     v
+}
+
+/// One step of the own kernels' core for the environments `who`: their
+/// rows of `state` (zeroed where `resets`) in, the new rows written back.
+fn own_step(
+    own: &mut OwnManager,
+    input: &CellInput,
+    state: &mut LstmState,
+    who: &[usize],
+    resets: &[bool],
+) -> OwnDecision {
+    let (mut all_h, mut all_c) = (floats(&state.h), floats(&state.c));
+    let rows = state.h.size()[0];
+    let hd = all_h.len() / rows as usize;
+    let (mut h, mut c) = (vec![0f32; who.len() * hd], vec![0f32; who.len() * hd]);
+    for (j, (&e, &reset)) in who.iter().zip(resets).enumerate() {
+        if !reset {
+            h[j * hd..][..hd].copy_from_slice(&all_h[e * hd..][..hd]);
+            c[j * hd..][..hd].copy_from_slice(&all_c[e * hd..][..hd]);
+        }
+    }
+    let d = own.act(input, &h, &c);
+    for (j, &e) in who.iter().enumerate() {
+        all_h[e * hd..][..hd].copy_from_slice(&d.h[j * hd..][..hd]);
+        all_c[e * hd..][..hd].copy_from_slice(&d.c[j * hd..][..hd]);
+    }
+    *state = LstmState {
+        h: Tensor::from_slice(&all_h).view([rows, hd as i64]),
+        c: Tensor::from_slice(&all_c).view([rows, hd as i64]),
+    };
+    d
 }

@@ -45,6 +45,7 @@ mod controller;
 pub mod feudal;
 pub mod init;
 mod manager;
+mod manager_kernels;
 mod run;
 pub mod stats;
 pub mod steering;

@@ -322,6 +322,11 @@ impl WideNarrowHead {
             .squeeze_dim(1)
     }
 
+    /// `π^ω`'s layer, then `π^n`'s hidden and output layers.
+    pub(super) fn layers(&self) -> [&nn::Linear; 3] {
+        [&self.wide, &self.narrow_hidden, &self.narrow_out]
+    }
+
     /// Window cells.
     pub fn window_len(&self) -> usize {
         self.window_len
