@@ -209,6 +209,31 @@ mod tests {
     }
 
     #[test]
+    fn the_bootstrap_interval_of_small_samples_equals_the_hand_computed_one() {
+        // Two runs [1, 3]: a resample is (1,1), (1,3), (3,1) or (3,3), so its
+        // IQM (the mean: fewer than four runs) is 1 with probability ¼, 2
+        // with ½ and 3 with ¼; the 2.5th and 97.5th percentiles of 2000
+        // resamples fall inside the ¼ masses at the ends: exactly [1, 3].
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        let e = iqm_interval(&[vec![1.0, 3.0]], 0.95, BOOTSTRAP_REPS, 3).unwrap();
+        assert!(close(e.point, 2.0) && close(e.lo, 1.0) && close(e.hi, 3.0), "{e:?}");
+        // Three runs: each end is a resample of one run repeated, mass 1/27
+        // (about 74 of 2000 resamples, above the 50 of each 2.5 % tail).
+        let e = iqm_interval(&[vec![2.9, 3.1, 3.4]], 0.95, BOOTSTRAP_REPS, 3).unwrap();
+        assert!(close(e.point, 9.4 / 3.0) && close(e.lo, 2.9) && close(e.hi, 3.4), "{e:?}");
+        // Two strata, [0, 1] and [10]: the pool is resampled within each, so
+        // its mean is (0+0+10)/3, (0+1+10)/3 or (1+1+10)/3 with ¼, ½, ¼.
+        let e = iqm_interval(&[vec![0.0, 1.0], vec![10.0]], 0.95, BOOTSTRAP_REPS, 3).unwrap();
+        assert!(
+            close(e.point, 11.0 / 3.0) && close(e.lo, 10.0 / 3.0) && close(e.hi, 4.0),
+            "{e:?}"
+        );
+        // One run: no spread to resample.
+        let e = iqm_interval(&[vec![4.2]], 0.95, BOOTSTRAP_REPS, 3).unwrap();
+        assert_eq!((e.point, e.lo, e.hi), (4.2, 4.2, 4.2));
+    }
+
+    #[test]
     fn an_agent_better_on_every_run_has_improvement_one_with_a_tight_interval() {
         let x = vec![vec![5.0, 5.2, 5.1]];
         let y = vec![vec![3.0, 3.1, 2.9]];
