@@ -216,11 +216,17 @@ mod tests {
         // resamples fall inside the ¼ masses at the ends: exactly [1, 3].
         let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
         let e = iqm_interval(&[vec![1.0, 3.0]], 0.95, BOOTSTRAP_REPS, 3).unwrap();
-        assert!(close(e.point, 2.0) && close(e.lo, 1.0) && close(e.hi, 3.0), "{e:?}");
+        assert!(
+            close(e.point, 2.0) && close(e.lo, 1.0) && close(e.hi, 3.0),
+            "{e:?}"
+        );
         // Three runs: each end is a resample of one run repeated, mass 1/27
         // (about 74 of 2000 resamples, above the 50 of each 2.5 % tail).
         let e = iqm_interval(&[vec![2.9, 3.1, 3.4]], 0.95, BOOTSTRAP_REPS, 3).unwrap();
-        assert!(close(e.point, 9.4 / 3.0) && close(e.lo, 2.9) && close(e.hi, 3.4), "{e:?}");
+        assert!(
+            close(e.point, 9.4 / 3.0) && close(e.lo, 2.9) && close(e.hi, 3.4),
+            "{e:?}"
+        );
         // Two strata, [0, 1] and [10]: the pool is resampled within each, so
         // its mean is (0+0+10)/3, (0+1+10)/3 or (1+1+10)/3 with ¼, ½, ¼.
         let e = iqm_interval(&[vec![0.0, 1.0], vec![10.0]], 0.95, BOOTSTRAP_REPS, 3).unwrap();

@@ -177,9 +177,10 @@ mod tests {
     use tch::nn::Module;
 
     fn net(seed: i64) -> (VarStore, tch::nn::Linear) {
-        tch::manual_seed(seed);
         let vs = VarStore::new(tch::Device::Cpu);
-        let lin = tch::nn::linear(vs.root() / "l", 3, 2, Default::default());
+        let lin = crate::seeding::init_seeded(seed as u64, || {
+            tch::nn::linear(vs.root() / "l", 3, 2, Default::default())
+        });
         (vs, lin)
     }
 

@@ -10,6 +10,11 @@
 //! training-time random number (HardKuma noise, sampled actions) from a
 //! [`SmallRng`](rand::rngs::SmallRng) owned by the model that uses it ([`uniform_like`],
 //! [`sample_categorical`]).
+//!
+//! Tests follow the same rule: libtest runs them on parallel threads of one
+//! process, so a test that draws random weights or `randn` inputs outside
+//! [`init_seeded`] can shift another test's seeded initialisation and make a
+//! determinism test fail at random.
 
 use std::sync::Mutex;
 

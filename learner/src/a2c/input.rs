@@ -566,14 +566,15 @@ mod tests {
             let out = 16;
             // Double precision, so that the comparison is of the functions
             // and not of float rounding in two summation orders.
-            let weight = (Tensor::randn([out, channels as i64, 3, 3], (Kind::Double, Device::Cpu))
-                * 0.3)
-                .set_requires_grad(true);
-            let bias = Tensor::randn([out], (Kind::Double, Device::Cpu)).set_requires_grad(true);
-            let upstream = Tensor::randn(
-                [n as i64, out, h as i64, w as i64],
-                (Kind::Double, Device::Cpu),
-            );
+            let (weight, bias, upstream) = crate::seeding::init_seeded(rng.random(), || {
+                let opts = (Kind::Double, Device::Cpu);
+                (
+                    (Tensor::randn([out, channels as i64, 3, 3], opts) * 0.3)
+                        .set_requires_grad(true),
+                    Tensor::randn([out], opts).set_requires_grad(true),
+                    Tensor::randn([n as i64, out, h as i64, w as i64], opts),
+                )
+            });
 
             let dense = encode_obs(&obs, goals).to_kind(Kind::Double).conv2d(
                 &weight,

@@ -173,14 +173,16 @@ mod tests {
         // A Manager trunk without the goal channel: the encoder is copied,
         // the first convolution without its goal plane; the core is not.
         let manager_vs = nn::VarStore::new(Device::Cpu);
-        let _m = Trunk::new(
-            &manager_vs.root(),
-            gcp_cfg.in_channels() - 1,
-            [4, 8],
-            16,
-            w,
-            h,
-        );
+        let _m = crate::seeding::init_seeded(3, || {
+            Trunk::new(
+                &manager_vs.root(),
+                gcp_cfg.in_channels() - 1,
+                [4, 8],
+                16,
+                w,
+                h,
+            )
+        });
         let before = manager_vs.variables()["core.weight_ih_l0"].copy();
         let report = copy_from(&src, &manager_vs, &["encoder"]);
         let d = manager_vs.variables();

@@ -597,12 +597,17 @@ mod tests {
             goal_map_windows: true,
             ..AgentConfig::default()
         };
-        let side = crate::seeding::init_seeded(3, || ManagerSide::new(&cfg, &layout, None));
-        tch::no_grad(|| {
-            for (_, mut t) in side.vs.variables() {
-                let noise = Tensor::randn_like(&t) * 0.1;
-                t.copy_(&(&t + noise));
-            }
+        // The noise is drawn under the generator's lock too: a draw outside
+        // it would interleave with another test's seeded initialisation.
+        let side = crate::seeding::init_seeded(3, || {
+            let side = ManagerSide::new(&cfg, &layout, None);
+            tch::no_grad(|| {
+                for (_, mut t) in side.vs.variables() {
+                    let noise = Tensor::randn_like(&t) * 0.1;
+                    t.copy_(&(&t + noise));
+                }
+            });
+            side
         });
         let (cells, meta) = observations(layout.width, layout.height);
         let view = crate::a2c::input::test_view(&cells, &meta, layout.width, layout.height);

@@ -495,8 +495,11 @@ mod tests {
         // Same core output, same window contents, two wide goals: π^n must
         // be able to tell them apart (the paper's π^n(g_n | s_t, g_w, s_w)).
         let vs = nn::VarStore::new(Device::Cpu);
-        let head = crate::seeding::init_seeded(3, || WideNarrowHead::new(&vs.root(), 8, 5, 9));
-        let h = Tensor::randn([1, 8], (Kind::Float, Device::Cpu)).repeat([2, 1]);
+        let (head, h) = crate::seeding::init_seeded(3, || {
+            let head = WideNarrowHead::new(&vs.root(), 8, 5, 9);
+            (head, Tensor::randn([1, 8], (Kind::Float, Device::Cpu)))
+        });
+        let h = h.repeat([2, 1]);
         let local = Tensor::zeros(
             [2, (9 * WINDOW_CHANNELS) as i64],
             (Kind::Float, Device::Cpu),
@@ -529,12 +532,15 @@ mod tests {
         let centre = layout.cell_index(1, 1) as u32;
         let valid = win.valid(centre);
         let vs = nn::VarStore::new(Device::Cpu);
-        let head = WideNarrowHead::new(&vs.root(), 8, 4, win.len());
-        let h = Tensor::randn([64, 8], (Kind::Float, Device::Cpu)) * 10.0;
-        let local = Tensor::randn(
-            [64, (win.len() * WINDOW_CHANNELS) as i64],
-            (Kind::Float, Device::Cpu),
-        );
+        let (head, h, local) = crate::seeding::init_seeded(4, || {
+            let head = WideNarrowHead::new(&vs.root(), 8, 4, win.len());
+            let h = Tensor::randn([64, 8], (Kind::Float, Device::Cpu)) * 10.0;
+            let local = Tensor::randn(
+                [64, (win.len() * WINDOW_CHANNELS) as i64],
+                (Kind::Float, Device::Cpu),
+            );
+            (head, h, local)
+        });
         let mask = Tensor::from_slice(&valid)
             .view([1, -1])
             .expand([64, -1], false);
@@ -551,7 +557,7 @@ mod tests {
     #[test]
     fn wide_narrow_log_probability_and_entropy_equal_the_hand_computed_values() {
         let vs = nn::VarStore::new(Device::Cpu);
-        let head = WideNarrowHead::new(&vs.root(), 2, 3, 4);
+        let head = crate::seeding::init_seeded(5, || WideNarrowHead::new(&vs.root(), 2, 3, 4));
         tch::no_grad(|| {
             // Wide logits [0, ln 2, ln 3] → π^ω = [1/6, 2/6, 3/6]; narrow
             // logits all 0 over 4 slots, slot 3 masked → uniform over 3.
