@@ -187,7 +187,7 @@ mod tests {
     #[test]
     fn weights_round_trip_through_memory_and_a_committed_directory() {
         let tmp = tempdir();
-        let dir = tmp.join("checkpoint");
+        let dir = tmp.path().join("checkpoint");
         let (vs_a, lin_a) = net(1);
         let bytes = var_store_bytes(&vs_a).unwrap();
         commit(&dir, &[("w.ot", &bytes), ("state.json", b"{}")]).unwrap();
@@ -208,7 +208,7 @@ mod tests {
     #[test]
     fn a_crash_between_the_renames_is_recovered() {
         let tmp = tempdir();
-        let dir = tmp.join("checkpoint");
+        let dir = tmp.path().join("checkpoint");
         commit(&dir, &[("a", b"1")]).unwrap();
         // As if killed after `<dir>` → `<dir>.old`, with a half-staged set.
         std::fs::rename(&dir, sibling(&dir, ".old")).unwrap();
@@ -221,7 +221,7 @@ mod tests {
     #[test]
     fn a_failed_write_names_the_file_and_keeps_the_previous_checkpoint() {
         let tmp = tempdir();
-        let dir = tmp.join("checkpoint");
+        let dir = tmp.path().join("checkpoint");
         commit(&dir, &[("a", b"1")]).unwrap();
         // A name that cannot be a file (a directory of that name is in the way).
         let err = commit(&dir, &[("a", b"2"), ("sub/../../x/..", b"3")]).unwrap_err();
@@ -231,14 +231,11 @@ mod tests {
         assert!(!sibling(&dir, ".new").exists());
     }
 
-    fn tempdir() -> PathBuf {
-        let p = std::env::temp_dir().join(format!(
-            "wg-ckpt-{}-{:?}",
-            std::process::id(),
-            std::thread::current().id()
-        ));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).unwrap();
-        p
+    /// A fresh directory, removed when the test ends (pass or fail).
+    fn tempdir() -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix("wg-ckpt-")
+            .tempdir()
+            .expect("a temporary directory")
     }
 }
