@@ -29,7 +29,7 @@ use tch::Tensor;
 use super::encoder::{RustEncoder, with_gradients};
 use super::input::CellInput;
 use super::lstm::{Heads, LstmCell, Sequence, transposed};
-use super::net::{ActorCritic, ActorCriticOutput, LstmState};
+use super::net::{ActorCritic, ActorCriticOutput, LstmState, Trunk};
 use super::rollout::floats;
 
 /// The network's weights in the kernels' layouts and the activations of
@@ -39,14 +39,7 @@ pub struct RustActorCritic {
     encoder: RustEncoder,
     cell: LstmCell,
     heads: Heads,
-    /// The core's weights in tch's layouts (the backward's) and transposed
-    /// (the forward's).
-    w_ih: Vec<f32>,
-    w_hh: Vec<f32>,
-    w_ih_t: Vec<f32>,
-    w_hh_t: Vec<f32>,
-    /// `b_ih + b_hh`.
-    bias: Vec<f32>,
+    core: CoreWeights,
     /// The policy head's weight, in tch's layout and transposed.
     w_pi: Vec<f32>,
     w_pi_t: Vec<f32>,
@@ -87,11 +80,7 @@ impl RustActorCritic {
                 hidden,
                 actions: net.config().num_actions as usize,
             },
-            w_ih: Vec::new(),
-            w_hh: Vec::new(),
-            w_ih_t: Vec::new(),
-            w_hh_t: Vec::new(),
-            bias: Vec::new(),
+            core: CoreWeights::default(),
             w_pi: Vec::new(),
             w_pi_t: Vec::new(),
             b_pi: Vec::new(),
@@ -117,13 +106,8 @@ impl RustActorCritic {
     pub fn load(&mut self, net: &ActorCritic) {
         let trunk = net.trunk();
         self.encoder.load(trunk);
-        let [w_ih, w_hh, b_ih, b_hh] = trunk.core_parameters().map(|t| floats(&t.detach()));
-        let (g4, hd) = (4 * self.cell.hidden, self.cell.hidden);
-        self.w_ih_t = transposed(&w_ih, g4, self.cell.input);
-        self.w_hh_t = transposed(&w_hh, g4, hd);
-        self.w_ih = w_ih;
-        self.w_hh = w_hh;
-        self.bias = b_ih.iter().zip(&b_hh).map(|(a, b)| a + b).collect();
+        self.core = CoreWeights::of(trunk, &self.cell);
+        let hd = self.cell.hidden;
         let [w_pi, b_pi, w_v, b_v] = net.head_parameters().map(|t| floats(&t.detach()));
         self.w_pi_t = transposed(&w_pi, self.heads.actions, hd);
         self.w_pi = w_pi;
@@ -192,9 +176,9 @@ impl RustActorCritic {
             &h,
             &c,
             n,
-            &self.w_ih_t,
-            &self.w_hh_t,
-            &self.bias,
+            &self.core.w_ih_t,
+            &self.core.w_hh_t,
+            &self.core.bias,
             &mut self.gates[sg..],
             &mut self.c_last,
             &mut self.tanh_c[s..],
@@ -234,7 +218,7 @@ impl RustActorCritic {
     /// `[T·B]`. Returns the gradients of [`parameters`]`(net)`, in order and
     /// in tch's layouts.
     pub fn backward(&mut self, dlogits: &[f32], dvalues: &[f32]) -> Vec<Tensor> {
-        let (hd, g4, a) = (self.cell.hidden, 4 * self.cell.hidden, self.heads.actions);
+        let (hd, a) = (self.cell.hidden, self.heads.actions);
         let (n, rows) = (self.batch, self.continues.len());
         assert_eq!(
             dlogits.len(),
@@ -258,44 +242,106 @@ impl RustActorCritic {
             &mut db_v,
             &mut dh_out,
         );
-        let mut dz = vec![0f32; rows * g4];
         let seq = Sequence {
             gates: &self.gates,
             c_in: &self.c_in,
             tanh_c: &self.tanh_c,
             continues: &self.continues,
         };
-        self.cell
-            .backward_through_time(n, &self.w_hh, &seq, &dh_out, &mut dz);
-        let (mut dw_ih, mut dw_hh) = (vec![0f32; self.w_ih.len()], vec![0f32; self.w_hh.len()]);
-        let (mut dbias, mut dx) = (vec![0f32; g4], vec![0f32; rows * hd]);
-        self.cell.weight_gradients(
-            &dz,
-            self.encoder.features(),
+        let mut grads = trunk_backward(
+            &mut self.encoder,
+            &self.cell,
+            &self.core,
+            &seq,
             &self.h_in,
-            rows,
-            &self.w_ih,
-            &mut dw_ih,
-            &mut dw_hh,
-            &mut dbias,
-            &mut dx,
+            n,
+            &dh_out,
         );
-        let encoder = self.encoder.backward(&dx);
-        let (g, hi, input) = (g4 as i64, hd as i64, self.cell.input as i64);
-        encoder
-            .into_iter()
-            .chain([
-                Tensor::from_slice(&dw_ih).view([g, input]),
-                Tensor::from_slice(&dw_hh).view([g, hi]),
-                Tensor::from_slice(&dbias),
-                Tensor::from_slice(&dbias),
-                Tensor::from_slice(&dw_pi).view([a as i64, hi]),
-                Tensor::from_slice(&db_pi),
-                Tensor::from_slice(&dw_v).view([1, hi]),
-                Tensor::from_slice(&[db_v]),
-            ])
-            .collect()
+        let hi = hd as i64;
+        grads.extend([
+            Tensor::from_slice(&dw_pi).view([a as i64, hi]),
+            Tensor::from_slice(&db_pi),
+            Tensor::from_slice(&dw_v).view([1, hi]),
+            Tensor::from_slice(&[db_v]),
+        ]);
+        grads
     }
+}
+
+/// An LSTM core's weights as the own kernels read them: in tch's layouts
+/// (the backward's) and transposed (the forward's).
+#[derive(Debug, Default)]
+pub(crate) struct CoreWeights {
+    /// `weight_ih` `[4H, I]` and `weight_hh` `[4H, H]`.
+    pub w_ih: Vec<f32>,
+    pub w_hh: Vec<f32>,
+    /// The same, transposed.
+    pub w_ih_t: Vec<f32>,
+    pub w_hh_t: Vec<f32>,
+    /// `b_ih + b_hh`.
+    pub bias: Vec<f32>,
+}
+
+impl CoreWeights {
+    /// The current weights of `trunk`'s core, whose shape `cell` gives.
+    pub(crate) fn of(trunk: &Trunk, cell: &LstmCell) -> Self {
+        let [w_ih, w_hh, b_ih, b_hh] = trunk.core_parameters().map(|t| floats(&t.detach()));
+        let (g4, hd) = (4 * cell.hidden, cell.hidden);
+        CoreWeights {
+            w_ih_t: transposed(&w_ih, g4, cell.input),
+            w_hh_t: transposed(&w_hh, g4, hd),
+            w_ih,
+            w_hh,
+            bias: b_ih.iter().zip(&b_hh).map(|(a, b)| a + b).collect(),
+        }
+    }
+}
+
+/// The backward pass of an encoder and LSTM core unrolled over `rows =
+/// steps · n` rows (the actor-critic's rollout, the Manager's queued
+/// decisions), from the loss's gradient `dh` `[rows, H]` of the core's
+/// hidden states: backward through time, the weight and input gradients
+/// over all rows at once, then the encoder's backward. Returns the
+/// encoder's parameters' gradients, then `weight_ih`, `weight_hh`,
+/// `bias_ih` and `bias_hh` (one sum, so the same for both), in tch's
+/// layouts.
+pub(crate) fn trunk_backward(
+    encoder: &mut RustEncoder,
+    cell: &LstmCell,
+    core: &CoreWeights,
+    seq: &Sequence<'_>,
+    h_in: &[f32],
+    n: usize,
+    dh: &[f32],
+) -> Vec<Tensor> {
+    let (hd, g4, input) = (cell.hidden, 4 * cell.hidden, cell.input);
+    let rows = seq.continues.len();
+    let mut dz = vec![0f32; rows * g4];
+    cell.backward_through_time(n, &core.w_hh, seq, dh, &mut dz);
+    let (mut dw_ih, mut dw_hh) = (vec![0f32; core.w_ih.len()], vec![0f32; core.w_hh.len()]);
+    let (mut dbias, mut dx) = (vec![0f32; g4], vec![0f32; rows * input]);
+    cell.weight_gradients(
+        &dz,
+        encoder.features(),
+        h_in,
+        rows,
+        &core.w_ih,
+        &mut dw_ih,
+        &mut dw_hh,
+        &mut dbias,
+        &mut dx,
+    );
+    let (g, hi, ii) = (g4 as i64, hd as i64, input as i64);
+    encoder
+        .backward(&dx)
+        .into_iter()
+        .chain([
+            Tensor::from_slice(&dw_ih).view([g, ii]),
+            Tensor::from_slice(&dw_hh).view([g, hi]),
+            Tensor::from_slice(&dbias),
+            Tensor::from_slice(&dbias),
+        ])
+        .collect()
 }
 
 /// The parameters [`RustActorCritic::backward`] returns gradients for, in

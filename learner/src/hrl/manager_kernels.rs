@@ -30,6 +30,7 @@ use crate::a2c::input::CellInput;
 use crate::a2c::kernels::FirstConv;
 use crate::a2c::lstm::{LstmCell, Sequence};
 use crate::a2c::rollout::floats;
+use crate::a2c::rust_net::{CoreWeights, trunk_backward};
 
 /// A linear layer as the forward reads it: the weight transposed `[in,
 /// out]` and the bias.
@@ -187,14 +188,7 @@ enum OwnHead {
 pub(super) struct OwnManager {
     encoder: RustEncoder,
     cell: LstmCell,
-    /// The core's weights in tch's layouts (the backward's) and
-    /// transposed (the forward's).
-    w_ih: Vec<f32>,
-    w_hh: Vec<f32>,
-    w_ih_t: Vec<f32>,
-    w_hh_t: Vec<f32>,
-    /// `b_ih + b_hh`.
-    bias: Vec<f32>,
+    core: CoreWeights,
     /// The update's unroll ([`OwnManager::unroll`]): per row `k·B + b`,
     /// the state it started from, its gates, `tanh` of its cell state, and
     /// whether it continues the previous step.
@@ -236,11 +230,7 @@ impl OwnManager {
                 input: hidden,
                 hidden,
             },
-            w_ih: Vec::new(),
-            w_hh: Vec::new(),
-            w_ih_t: Vec::new(),
-            w_hh_t: Vec::new(),
-            bias: Vec::new(),
+            core: CoreWeights::default(),
             h_in: Vec::new(),
             c_in: Vec::new(),
             gates: Vec::new(),
@@ -263,13 +253,7 @@ impl OwnManager {
     pub(super) fn load(&mut self, net: &Manager) {
         let trunk = net.trunk();
         self.encoder.load(trunk);
-        let [w_ih, w_hh, b_ih, b_hh] = trunk.core_parameters().map(|t| floats(&t.detach()));
-        let (g4, hd) = (4 * self.cell.hidden, self.cell.hidden);
-        self.w_ih_t = transposed(&w_ih, g4, self.cell.input);
-        self.w_hh_t = transposed(&w_hh, g4, hd);
-        self.w_ih = w_ih;
-        self.w_hh = w_hh;
-        self.bias = b_ih.iter().zip(&b_hh).map(|(a, b)| a + b).collect();
+        self.core = CoreWeights::of(trunk, &self.cell);
         self.value = Dense::of(net.value_head());
         self.head = match net.head() {
             ManagerHead::Feudal { cells, valid } => OwnHead::Feudal {
@@ -309,9 +293,9 @@ impl OwnManager {
             h,
             c,
             n,
-            &self.w_ih_t,
-            &self.w_hh_t,
-            &self.bias,
+            &self.core.w_ih_t,
+            &self.core.w_hh_t,
+            &self.core.bias,
             &mut gates,
             &mut c_out,
             &mut tanh_c,
@@ -376,9 +360,9 @@ impl OwnManager {
                 &self.h_in[r.start * hd..r.end * hd],
                 &self.c_in[r.start * hd..r.end * hd],
                 b,
-                &self.w_ih_t,
-                &self.w_hh_t,
-                &self.bias,
+                &self.core.w_ih_t,
+                &self.core.w_hh_t,
+                &self.core.bias,
                 &mut self.gates[r.start * g4..r.end * g4],
                 &mut cs[r.start * hd..r.end * hd],
                 &mut self.tanh_c[r.start * hd..r.end * hd],
@@ -393,41 +377,21 @@ impl OwnManager {
     /// trunk's [`crate::a2c::net::Trunk::encoder_parameters`] then
     /// [`crate::a2c::net::Trunk::core_parameters`], in tch's layouts.
     pub(super) fn unroll_backward(&mut self, dh: &[f32], b: usize) -> Vec<tch::Tensor> {
-        let (hd, g4, i) = (self.cell.hidden, 4 * self.cell.hidden, self.cell.input);
-        let rows = self.continues.len();
-        let mut dz = vec![0f32; rows * g4];
         let seq = Sequence {
             gates: &self.gates,
             c_in: &self.c_in,
             tanh_c: &self.tanh_c,
             continues: &self.continues,
         };
-        self.cell
-            .backward_through_time(b, &self.w_hh, &seq, dh, &mut dz);
-        let (mut dw_ih, mut dw_hh) = (vec![0f32; self.w_ih.len()], vec![0f32; self.w_hh.len()]);
-        let (mut dbias, mut dx) = (vec![0f32; g4], vec![0f32; rows * i]);
-        self.cell.weight_gradients(
-            &dz,
-            self.encoder.features(),
+        trunk_backward(
+            &mut self.encoder,
+            &self.cell,
+            &self.core,
+            &seq,
             &self.h_in,
-            rows,
-            &self.w_ih,
-            &mut dw_ih,
-            &mut dw_hh,
-            &mut dbias,
-            &mut dx,
-        );
-        let (g, hi, ii) = (g4 as i64, hd as i64, i as i64);
-        self.encoder
-            .backward(&dx)
-            .into_iter()
-            .chain([
-                tch::Tensor::from_slice(&dw_ih).view([g, ii]),
-                tch::Tensor::from_slice(&dw_hh).view([g, hi]),
-                tch::Tensor::from_slice(&dbias),
-                tch::Tensor::from_slice(&dbias),
-            ])
-            .collect()
+            b,
+            dh,
+        )
     }
 
     /// FN: the subgoal probabilities `[n, H·W]` (section 4.1), the goal
