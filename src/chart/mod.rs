@@ -35,8 +35,9 @@ pub use self::line::{Band, LineChart, Series, XScale, band_chart};
 const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSansMono.ttf");
 
 /// Colours for successive series: matplotlib's tab10, so that the ten
-/// configurations of the paper's Table 1 each get their own.
-pub const PALETTE: [Rgb; 10] = [
+/// configurations of the paper's Table 1 each get their own, then black and
+/// a dark magenta for a reference row beside them (`table --reference`).
+pub const PALETTE: [Rgb; 12] = [
     [31, 119, 180],
     [255, 127, 14],
     [44, 160, 44],
@@ -47,6 +48,8 @@ pub const PALETTE: [Rgb; 10] = [
     [127, 127, 127],
     [188, 189, 34],
     [23, 190, 207],
+    [0, 0, 0],
+    [128, 0, 96],
 ];
 
 /// Registers the shipped font as plotters' `sans-serif`, once per process
