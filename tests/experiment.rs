@@ -184,6 +184,12 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     assert!(md.contains(&a2c_cell), "{a2c_cell} not in\n{md}");
     assert!(md.contains("| FN | — | Fail |"), "{md}");
     assert!(md.contains("| small | 3840 | 1920 | 2 |"), "{md}");
+    // Every cell's budget beside it, with its share of the paper's 100k
+    // iterations × 32 agents × 60 steps.
+    assert!(
+        md.contains("| configuration | small (3840 env steps, 0.002 % of the paper's) | paper |"),
+        "{md}"
+    );
     assert!(md.contains("## Time to score"), "{md}");
     for f in [
         "docs/figures/fig4-small-multigoal-pi-g-init.png",

@@ -266,7 +266,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             let mut head = "| configuration |".to_string();
             let mut rule = "|---|".to_string();
             for m in &mazes {
-                let _ = write!(head, " {m} | paper |");
+                let _ = write!(head, " {} | paper |", budget_label(&runs, m));
                 rule.push_str("---:|---:|");
             }
             let _ = writeln!(md, "{head}\n{rule}");
@@ -298,7 +298,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         let _ = writeln!(md, "{head}\n{rule}");
         for m in &mazes {
-            let mut line = format!("| {m} |");
+            let mut line = format!("| {} |", budget_label(&runs, m));
             for c in TABLE2_CONFIGS {
                 let k = (m.to_string(), "doorkey".to_string(), c.to_string());
                 let _ = write!(
@@ -531,6 +531,30 @@ fn mean_band_over(
             })
             .collect(),
     }
+}
+
+/// A maze's column or row label with the budget of its runs beside it and
+/// that budget's share of the paper's: `small (3024000 env steps, 1.575 %
+/// of the paper's)`, as in the budgets table.
+fn budget_label(runs: &[RunResult], maze: &str) -> String {
+    let Some(steps) = runs
+        .iter()
+        .filter(|r| r.maze == maze)
+        .map(|r| r.env_steps)
+        .max()
+    else {
+        return maze.to_string();
+    };
+    let r = runs
+        .iter()
+        .find(|r| r.maze == maze)
+        .expect("a run of the maze");
+    let paper =
+        PAPER_ITERATIONS * (r.train_config.agent.envs * r.train_config.agent.rollout_len) as u64;
+    format!(
+        "{maze} ({steps} env steps, {:.3} % of the paper's)",
+        100.0 * steps as f64 / paper as f64
+    )
 }
 
 /// The paper's name of configuration `c` (`WN V_p + traversal + π_g
