@@ -598,6 +598,33 @@ fn time_to_score_takes_a_longer_a2c_as_reference_and_bounds_censored_seeds() {
         "{md}"
     );
 
+    // Two reference sets of one maze and task: the one trained longest
+    // is the reference, and the table says which it left out.
+    for seed in [0, 1] {
+        let p = format!("small/multigoal/a2c/seed-{seed}.json");
+        copy(&format!("results/paper-real/{p}"), &format!("short/{p}"));
+    }
+    let out = worldgraph(
+        d,
+        &[
+            "table",
+            "grid",
+            "--out",
+            "out/results.md",
+            "--reference",
+            "short",
+            "--reference",
+            "longer",
+        ],
+    );
+    let (_, err) = ok(&out);
+    assert!(
+        err.contains("short: small/multigoal is shorter than longer's"),
+        "{err}"
+    );
+    let again = std::fs::read_to_string(d.join("out/results.md")).unwrap();
+    assert!(again.contains(&reference) && again.contains(&wn), "{again}");
+
     // A reference is flat A2C only.
     copy(
         "results/paper-real/small/multigoal/fn/seed-0.json",

@@ -41,13 +41,15 @@ pub struct TableArgs {
     #[arg(long, default_value_t = 0.9)]
     pub threshold: f64,
     /// A result set of the flat A2C trained longer than this grid (e.g.
-    /// `results/a2c-plateau`), used as the time-to-score reference row where
-    /// it has runs of a maze and task: the speed-up over A2C is then defined
-    /// even when the grid's own A2C does not reach the threshold within the
-    /// grid's budget. Checked to hold only A2C runs on the grid's validation
-    /// protocol and agent shape, each at least as long as the grid's runs.
+    /// `results/a2c-plateau-18m`), used as the time-to-score reference row
+    /// where it has runs of a maze and task: the speed-up over A2C is then
+    /// defined even when the grid's own A2C does not reach the threshold
+    /// within the grid's budget. Checked to hold only A2C runs on the grid's
+    /// validation protocol and agent shape, each at least as long as the
+    /// grid's runs. Repeatable (one set per maze, say); where two sets hold
+    /// the same maze and task, the one trained longest is the reference.
     #[arg(long, value_name = "DIR")]
-    pub reference: Option<PathBuf>,
+    pub reference: Vec<PathBuf>,
     /// The tidy per-run CSV written (one row per run: maze, task, config,
     /// seed, test score, budget, wall time, commit ...) [default:
     /// `scores.csv` in the results directory].
@@ -133,18 +135,14 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         a.threshold > 0.0 && a.threshold <= 1.0,
         "--threshold must be in (0, 1]"
     );
-    let reference = match &a.reference {
-        Some(dir) => {
-            let (r, unused) = time_to_score::Reference::load(dir, &runs)?;
-            for u in unused {
-                eprintln!(
-                    "table: --reference {} has {u}, which this grid has not run; left out",
-                    dir.display()
-                );
-            }
-            Some(r)
+    let reference = if a.reference.is_empty() {
+        None
+    } else {
+        let (r, left_out) = time_to_score::Reference::load(&a.reference, &runs)?;
+        for note in left_out {
+            eprintln!("table: {note}; left out");
         }
-        None => None,
+        Some(r)
     };
     let out_dir = a.out.parent().unwrap_or(Path::new(".")).to_path_buf();
     let figures = a.figures.clone().unwrap_or_else(|| out_dir.join("figures"));
@@ -173,9 +171,9 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
          (written by `worldgraph experiment`, grids in `experiments/`); do not edit by hand.\n",
         a.results.display(),
         a.reference
-            .as_ref()
+            .iter()
             .map(|r| format!(" --reference {}", r.display()))
-            .unwrap_or_default(),
+            .collect::<String>(),
         runs.len(),
         a.results.display().to_string().trim_end_matches('/')
     );

@@ -20,7 +20,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::chart::{LineChart, Series, XScale};
 use crate::results::{RunResult, read_all_runs};
@@ -110,98 +110,130 @@ fn first_reach(r: &RunResult, threshold: f64) -> Option<(u64, f64)> {
 }
 
 /// The flat A2C trained longer than the grid (`--reference`), per maze and
-/// task.
+/// task: the result set it came from and its runs.
 pub(super) struct Reference {
-    dir: String,
-    runs: BTreeMap<(String, String), Vec<RunResult>>,
+    runs: BTreeMap<(String, String), (String, Vec<RunResult>)>,
 }
 
 impl Reference {
-    /// Reads `dir` and checks it against the grid's `runs`: only flat A2C
+    /// Reads `dirs` and checks each against the grid's `runs`: only flat A2C
     /// runs, on the grid's validation protocol and agent shape, at least as
-    /// long as the grid's budget. Mazes and tasks the grid has not run are
-    /// left out (returned for a note).
-    pub(super) fn load(dir: &Path, grid: &[RunResult]) -> anyhow::Result<(Reference, Vec<String>)> {
-        let (runs, _) = read_all_runs(dir)?;
-        anyhow::ensure!(
-            !runs.is_empty(),
-            "--reference {}: no run summaries there",
-            dir.display()
-        );
-        let mut by_cell: BTreeMap<(String, String), Vec<RunResult>> = BTreeMap::new();
-        let mut unused = Vec::new();
-        for r in runs {
-            let what = format!(
-                "--reference {}: {}/{}/{} seed {}",
-                dir.display(),
-                r.maze,
-                r.task,
-                r.config,
-                r.seed
-            );
+    /// long as the grid's budget. Where two sets hold the same maze and task
+    /// the longer one is kept. Returns, for a note, what was left out: the
+    /// mazes and tasks the grid has not run, and the shorter of two sets.
+    pub(super) fn load(
+        dirs: &[PathBuf],
+        grid: &[RunResult],
+    ) -> anyhow::Result<(Reference, Vec<String>)> {
+        let mut kept: BTreeMap<(String, String), (String, Vec<RunResult>)> = BTreeMap::new();
+        let mut left_out = Vec::new();
+        for dir in dirs {
+            let (runs, _) = read_all_runs(dir)?;
             anyhow::ensure!(
-                r.config == "a2c",
-                "{what} is not a flat A2C run; the reference holds the flat A2C trained longer"
+                !runs.is_empty(),
+                "--reference {}: no run summaries there",
+                dir.display()
             );
-            let Some(g) = grid.iter().find(|g| g.maze == r.maze && g.task == r.task) else {
-                unused.push(format!("{}/{}", r.maze, r.task));
-                continue;
-            };
-            anyhow::ensure!(
-                (
-                    r.validation_stream,
-                    r.validation_seeds,
-                    r.train_config.eval_every
-                ) == (
-                    g.validation_stream,
-                    g.validation_seeds,
-                    g.train_config.eval_every
-                ),
-                "{what} is validated on {} seeds of stream {} every {} env steps, the grid on {} \
-                 of stream {} every {}: its times to score are not comparable",
-                r.validation_seeds,
-                r.validation_stream,
-                r.train_config.eval_every,
-                g.validation_seeds,
-                g.validation_stream,
-                g.train_config.eval_every
-            );
-            let (ra, ga) = (&r.train_config.agent, &g.train_config.agent);
-            anyhow::ensure!(
-                (ra.envs, ra.rollout_len) == (ga.envs, ga.rollout_len),
-                "{what} ran {} envs × rollout {}, the grid {} × {}",
-                ra.envs,
-                ra.rollout_len,
-                ga.envs,
-                ga.rollout_len
-            );
-            let budget = grid
-                .iter()
-                .filter(|g| g.maze == r.maze && g.task == r.task)
-                .map(|g| g.env_steps)
-                .max()
-                .unwrap_or(0);
-            anyhow::ensure!(
-                r.env_steps >= budget,
-                "{what} trained {} env steps, fewer than the grid's {budget}: a reference is the \
-                 flat A2C trained longer",
-                r.env_steps
-            );
-            by_cell
-                .entry((r.maze.clone(), r.task.clone()))
-                .or_default()
-                .push(r);
+            let mut by_cell: BTreeMap<(String, String), Vec<RunResult>> = BTreeMap::new();
+            for r in runs {
+                check(dir, &r, grid)?;
+                by_cell
+                    .entry((r.maze.clone(), r.task.clone()))
+                    .or_default()
+                    .push(r);
+            }
+            for ((m, t), rs) in by_cell {
+                if !grid.iter().any(|g| g.maze == m && g.task == t) {
+                    left_out.push(format!(
+                        "--reference {} has {m}/{t}, which this grid has not run",
+                        dir.display()
+                    ));
+                    continue;
+                }
+                let name = dir.display().to_string();
+                let longest = |rs: &[RunResult]| rs.iter().map(|r| r.env_steps).max();
+                match kept.get(&(m.clone(), t.clone())) {
+                    Some((other, old)) if longest(old) >= longest(&rs) => {
+                        left_out.push(format!(
+                            "--reference {name}: {m}/{t} is shorter than {other}'s"
+                        ));
+                    }
+                    Some((other, _)) => {
+                        left_out.push(format!(
+                            "--reference {other}: {m}/{t} is shorter than {name}'s"
+                        ));
+                        kept.insert((m, t), (name, rs));
+                    }
+                    None => {
+                        kept.insert((m, t), (name, rs));
+                    }
+                }
+            }
         }
-        unused.sort();
-        unused.dedup();
-        Ok((
-            Reference {
-                dir: dir.display().to_string(),
-                runs: by_cell,
-            },
-            unused,
-        ))
+        Ok((Reference { runs: kept }, left_out))
     }
+}
+
+/// Checks one run of the reference set `dir` against the grid: a flat A2C
+/// run, validated and shaped as the grid's runs of its maze and task, at
+/// least as long as they are.
+fn check(dir: &Path, r: &RunResult, grid: &[RunResult]) -> anyhow::Result<()> {
+    let what = format!(
+        "--reference {}: {}/{}/{} seed {}",
+        dir.display(),
+        r.maze,
+        r.task,
+        r.config,
+        r.seed
+    );
+    anyhow::ensure!(
+        r.config == "a2c",
+        "{what} is not a flat A2C run; the reference holds the flat A2C trained longer"
+    );
+    let Some(g) = grid.iter().find(|g| g.maze == r.maze && g.task == r.task) else {
+        return Ok(());
+    };
+    anyhow::ensure!(
+        (
+            r.validation_stream,
+            r.validation_seeds,
+            r.train_config.eval_every
+        ) == (
+            g.validation_stream,
+            g.validation_seeds,
+            g.train_config.eval_every
+        ),
+        "{what} is validated on {} seeds of stream {} every {} env steps, the grid on {} \
+         of stream {} every {}: its times to score are not comparable",
+        r.validation_seeds,
+        r.validation_stream,
+        r.train_config.eval_every,
+        g.validation_seeds,
+        g.validation_stream,
+        g.train_config.eval_every
+    );
+    let (ra, ga) = (&r.train_config.agent, &g.train_config.agent);
+    anyhow::ensure!(
+        (ra.envs, ra.rollout_len) == (ga.envs, ga.rollout_len),
+        "{what} ran {} envs × rollout {}, the grid {} × {}",
+        ra.envs,
+        ra.rollout_len,
+        ga.envs,
+        ga.rollout_len
+    );
+    let budget = grid
+        .iter()
+        .filter(|g| g.maze == r.maze && g.task == r.task)
+        .map(|g| g.env_steps)
+        .max()
+        .unwrap_or(0);
+    anyhow::ensure!(
+        r.env_steps >= budget,
+        "{what} trained {} env steps, fewer than the grid's {budget}: a reference is the \
+         flat A2C trained longer",
+        r.env_steps
+    );
+    Ok(())
 }
 
 /// How many of the reference's seeds repeat the grid's A2C run of the same
@@ -256,14 +288,13 @@ pub(super) fn section(
          figures plot the share of seeds that reached the threshold against env steps.\n",
         100.0 * share
     );
-    if let Some(r) = reference {
+    if reference.is_some() {
         let _ = writeln!(
             tts,
-            "The reference row is the flat A2C trained longer, read from `{}` \
-             (`worldgraph table --reference`; same validation protocol and agent, checked), \
-             where it has runs of that maze and task; the threshold still comes from this \
-             grid's cells alone.\n",
-            r.dir
+            "Where a maze and task has one, the reference row is the flat A2C trained \
+             longer (`worldgraph table --reference`; same validation protocol and agent, \
+             checked; the notes below the table name its result set); the threshold still \
+             comes from this grid's cells alone.\n"
         );
     }
     let _ = writeln!(
@@ -308,18 +339,21 @@ pub(super) fn section(
         // grid's own.
         let longer = reference.and_then(|r| r.runs.get(&(m.clone(), t.clone())));
         let reference_name = match longer {
-            Some(rs) => {
+            Some((dir, rs)) => {
                 let steps = rs.iter().map(|r| r.env_steps).max().unwrap_or(0);
                 let name = format!("A2C, {:.2}M env steps (reference)", steps as f64 / 1e6);
+                let mut note = format!("{m} {t}: the reference is `{dir}`");
                 if let Some(g) = grid_a2c {
                     let (same, both) = repeats(rs, g);
-                    notes.push(format!(
-                        "{m} {t}: the reference's first {} env steps repeat this grid's A2C run \
-                         of the same seed at every validation, to the last digit, on {same} of \
-                         the {both} seeds both ran.",
+                    let _ = write!(
+                        note,
+                        "; its first {} env steps repeat this grid's A2C run of the same seed \
+                         at every validation, to the last digit, on {same} of the {both} seeds \
+                         both ran",
                         g.iter().map(|r| r.env_steps).max().unwrap_or(0)
-                    ));
+                    );
                 }
+                notes.push(format!("{note}."));
                 here.insert(0, (name.clone(), rs.iter().collect()));
                 Some(name)
             }
