@@ -228,8 +228,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             rs.iter().map(|r| r.train_config.eval_every).collect();
         let wall = rs.iter().map(|r| r.wall_seconds).sum::<f64>() / rs.len() as f64;
         let sps = rs.iter().map(|r| r.train_steps_per_sec).sum::<f64>() / rs.len() as f64;
-        let paper_steps = PAPER_ITERATIONS
-            * (rs[0].train_config.agent.envs * rs[0].train_config.agent.rollout_len) as u64;
+        let paper_steps = paper_budget(rs[0]);
         let _ = writeln!(
             md,
             "| {m} | {} | {} | {} | {wall:.0} | {sps:.0} | {:.3} % |",
@@ -364,13 +363,20 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let _ = writeln!(md);
 
     // Time to score: the headline, put after the budgets.
-    let tts = time_to_score::section(&cells, a.threshold, reference.as_ref(), &figures, &fig_link)?;
-    md.insert_str(headline_at, &tts);
     let mut pairs: Vec<(String, String)> = cells
         .keys()
         .map(|(m, t, _)| (m.clone(), t.clone()))
         .collect();
     pairs.dedup();
+    let tts = time_to_score::section(
+        &cells,
+        &pairs,
+        a.threshold,
+        reference.as_ref(),
+        &figures,
+        &fig_link,
+    )?;
+    md.insert_str(headline_at, &tts);
 
     // Figure 4.
     let _ = writeln!(
@@ -531,6 +537,12 @@ fn mean_band_over(
     }
 }
 
+/// The paper's budget in env steps at `r`'s agent shape: 100k iterations
+/// × its envs × its rollout.
+fn paper_budget(r: &RunResult) -> u64 {
+    PAPER_ITERATIONS * (r.train_config.agent.envs * r.train_config.agent.rollout_len) as u64
+}
+
 /// A maze's column or row label with the budget of its runs beside it and
 /// that budget's share of the paper's: `small (3024000 env steps, 1.575 %
 /// of the paper's)`, as in the budgets table.
@@ -547,8 +559,7 @@ fn budget_label(runs: &[RunResult], maze: &str) -> String {
         .iter()
         .find(|r| r.maze == maze)
         .expect("a run of the maze");
-    let paper =
-        PAPER_ITERATIONS * (r.train_config.agent.envs * r.train_config.agent.rollout_len) as u64;
+    let paper = paper_budget(r);
     format!(
         "{maze} ({steps} env steps, {:.3} % of the paper's)",
         100.0 * steps as f64 / paper as f64

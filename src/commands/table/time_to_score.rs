@@ -267,6 +267,7 @@ fn repeats(reference: &[RunResult], grid_a2c: &[&RunResult]) -> (usize, usize) {
 /// and task (written into `figures`, linked as `fig_link`).
 pub(super) fn section(
     cells: &Cells,
+    pairs: &[(String, String)],
     share: f64,
     reference: Option<&Reference>,
     figures: &Path,
@@ -301,13 +302,8 @@ pub(super) fn section(
         tts,
         "| maze | task | threshold | configuration | reached | env steps | wall s | speed-up over A2C (steps / wall) |\n|---|---|---:|---|---:|---:|---:|---:|"
     );
-    let mut pairs: Vec<(String, String)> = cells
-        .keys()
-        .map(|(m, t, _)| (m.clone(), t.clone()))
-        .collect();
-    pairs.dedup();
     let mut notes = Vec::new();
-    for (m, t) in &pairs {
+    for (m, t) in pairs {
         // The best cell: the highest mean over seeds of the runs' best
         // validation scores (one lucky seed does not set the bar).
         let best = cells
@@ -411,7 +407,7 @@ pub(super) fn section(
     for n in &notes {
         let _ = writeln!(tts, "{n}\n");
     }
-    for (m, t) in &pairs {
+    for (m, t) in pairs {
         let file = format!("time-to-score-{m}-{t}.png");
         if figures.join(&file).exists() {
             let _ = writeln!(tts, "![time to score, {m} {t}]({fig_link}/{file})");
