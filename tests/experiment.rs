@@ -219,6 +219,11 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     let poi =
         format!("| WN V_p + traversal + π_g init over A2C | 1 | 1 / 1 | {p:.2} [{p:.2}, {p:.2}] |");
     assert!(md.contains(&poi), "{poi} not in\n{md}");
+    // ... and the same on that maze and task alone.
+    let per_task = format!(
+        "| WN V_p + traversal + π_g init over A2C | small | multigoal | 1 / 1 | {p:.2} [{p:.2}, {p:.2}] |"
+    );
+    assert!(md.contains(&per_task), "{per_task} not in\n{md}");
     // scores.csv: a header and one row per run that pandas reads as is.
     let csv = std::fs::read_to_string(d.join("results/scores.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();

@@ -4,10 +4,12 @@
 //!
 //! - Per maze and task, every configuration's interquartile mean of the test
 //!   scores over its seeds with a stratified bootstrap 95 % interval.
-//! - The probability of improvement of `V_p` over `V_rand`, of WN over FN
-//!   and of every hierarchy over A2C, each pooled over the mazes and tasks
-//!   where both configurations ran (one stratum per maze and task), with
-//!   its interval.
+//! - The probability of improvement of `V_p` over `V_rand`, of WN over FN,
+//!   of `π_g` initialisation, of traversal and of every hierarchy over A2C,
+//!   each pooled over the mazes and tasks where both configurations ran (one
+//!   stratum per maze and task), with its interval; then the same per maze
+//!   and task, since an ordering that holds on one task and fails on
+//!   another averages to a coin flip.
 //! - `scores.csv`: one row per run, tidy, so that pandas reads it as it is
 //!   and `rliable` takes a score matrix from a pivot of it.
 
@@ -36,7 +38,7 @@ fn scores_of(runs: &[RunResult]) -> Scores {
 
 /// The comparisons of the probability of improvement: (X, Y, what it
 /// asks), X and Y configuration names of the grids.
-const COMPARISONS: [(&str, &str, &str); 5] = [
+const COMPARISONS: [(&str, &str, &str); 10] = [
     (
         "wn-pivotal-init",
         "wn-random-init",
@@ -54,6 +56,27 @@ const COMPARISONS: [(&str, &str, &str); 5] = [
     ),
     ("wn-all-init", "fn-init", "WN over FN (V_all, π_g init)"),
     ("wn-pivotal-init", "fn-init", "WN V_p over FN (π_g init)"),
+    ("fn-init", "fn", "π_g init (FN)"),
+    (
+        "wn-random-trav-init",
+        "wn-random-trav",
+        "π_g init (WN V_rand + traversal)",
+    ),
+    (
+        "wn-pivotal-trav-init",
+        "wn-pivotal-trav",
+        "π_g init (WN V_p + traversal)",
+    ),
+    (
+        "wn-random-trav-init",
+        "wn-random-init",
+        "traversal (WN V_rand + π_g init)",
+    ),
+    (
+        "wn-pivotal-trav-init",
+        "wn-pivotal-init",
+        "traversal (WN V_p + π_g init)",
+    ),
 ];
 
 /// The strata where both `x` and `y` ran: X's and Y's scores per maze and
@@ -70,6 +93,33 @@ fn paired_strata(s: &Scores, x: &str, y: &str) -> (Vec<Vec<f64>>, Vec<Vec<f64>>)
         }
     }
     (xs, ys)
+}
+
+/// Every comparison the section reports: [`COMPARISONS`], then each
+/// hierarchy over A2C in Table 1's order.
+fn comparisons(
+    s: &Scores,
+    display: impl Fn(&str) -> String,
+    order: impl Fn(&str) -> usize,
+) -> Vec<(String, String, String)> {
+    let mut rows: Vec<(String, String, String)> = COMPARISONS
+        .iter()
+        .map(|(x, y, what)| (x.to_string(), y.to_string(), what.to_string()))
+        .collect();
+    // Each configuration once (a set: configurations outside Table 1 share
+    // one sort key, so sorting would not bring their copies together).
+    let mut hierarchies: Vec<&String> = s
+        .keys()
+        .map(|(_, _, c)| c)
+        .filter(|c| c.as_str() != "a2c")
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    hierarchies.sort_by_key(|c| order(c));
+    for c in hierarchies {
+        rows.push((c.clone(), "a2c".into(), format!("{} over A2C", display(c))));
+    }
+    rows
 }
 
 fn interval_text(e: &Estimate, digits: usize) -> String {
@@ -95,7 +145,7 @@ pub fn section(
          the runs; with fewer than four runs it is their mean) with a {:.0} % stratified bootstrap \
          confidence interval ({BOOTSTRAP_REPS} resamples of the runs, seeded), and the \
          probability of improvement P(X > Y) that a run of X scores above a run of Y on the same \
-         maze and task (ties count half), averaged over the mazes and tasks where both ran. \
+         maze and task (ties count half), averaged over the mazes and tasks where both ran, then per maze and task. \
          Door-Key scores are success rates in [0, 1]. Agarwal et al. 2021, \"Deep Reinforcement \
          Learning at the Edge of the Statistical Precipice\". Every run's figures are in \
          `scores.csv` beside the summaries.\n",
@@ -137,26 +187,10 @@ pub fn section(
         "\n### Probability of improvement\n\n\
          | X over Y | mazes × tasks | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---:|---:|---|"
     );
-    let mut rows: Vec<(String, String, String)> = COMPARISONS
-        .iter()
-        .map(|(x, y, what)| (x.to_string(), y.to_string(), what.to_string()))
-        .collect();
-    // Each configuration once (a set: configurations outside Table 1 share
-    // one sort key, so sorting would not bring their copies together).
-    let mut hierarchies: Vec<&String> = s
-        .keys()
-        .map(|(_, _, c)| c)
-        .filter(|c| c.as_str() != "a2c")
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
-    hierarchies.sort_by_key(|c| order(c));
-    for c in hierarchies {
-        rows.push((c.clone(), "a2c".into(), format!("{} over A2C", display(c))));
-    }
+    let rows = comparisons(&s, &display, &order);
     let mut any = false;
-    for (x, y, what) in rows {
-        let (xs, ys) = paired_strata(&s, &x, &y);
+    for (x, y, what) in &rows {
+        let (xs, ys) = paired_strata(&s, x, y);
         let Some(e) = improvement_interval(&xs, &ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) else {
             continue;
         };
@@ -175,6 +209,32 @@ pub fn section(
             md,
             "| (no pair of configurations ran on the same maze and task) | | | |"
         );
+        return md;
+    }
+    let _ = writeln!(
+        md,
+        "\n#### Per maze and task\n\n\
+         The same comparisons on each maze and task alone (the bootstrap resamples that cell's \
+         runs).\n\n\
+         | X over Y | maze | task | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---|---|---:|---|"
+    );
+    for (x, y, what) in &rows {
+        for (m, t) in &cells {
+            let key = |c: &str| (m.clone(), t.clone(), c.to_string());
+            let (Some(xv), Some(yv)) = (s.get(&key(x)), s.get(&key(y))) else {
+                continue;
+            };
+            let (xs, ys) = (std::slice::from_ref(xv), std::slice::from_ref(yv));
+            if let Some(e) = improvement_interval(xs, ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) {
+                let _ = writeln!(
+                    md,
+                    "| {what} | {m} | {t} | {} / {} | {} |",
+                    xv.len(),
+                    yv.len(),
+                    interval_text(&e, 2)
+                );
+            }
+        }
     }
     let _ = writeln!(md);
     md
