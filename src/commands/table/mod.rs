@@ -37,7 +37,8 @@ pub struct TableArgs {
     #[arg(long)]
     pub figures: Option<PathBuf>,
     /// Time to score: the threshold per maze and task, as a share of the
-    /// best validation score any configuration reached there.
+    /// best configuration's score there (its mean over seeds of the runs'
+    /// best validation scores, so one lucky seed does not set the bar).
     #[arg(long, default_value_t = 0.9)]
     pub threshold: f64,
     /// A result set of the flat A2C trained longer than this grid (e.g.
