@@ -79,20 +79,19 @@ const COMPARISONS: [(&str, &str, &str); 10] = [
     ),
 ];
 
-/// The strata where both `x` and `y` ran: X's and Y's scores per maze and
-/// task, in the same order.
-fn paired_strata(s: &Scores, x: &str, y: &str) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
-    let (mut xs, mut ys) = (Vec::new(), Vec::new());
-    for ((m, t, c), v) in s {
-        if c != x {
-            continue;
-        }
-        if let Some(w) = s.get(&(m.clone(), t.clone(), y.to_string())) {
-            xs.push(v.clone());
-            ys.push(w.clone());
-        }
-    }
-    (xs, ys)
+/// One maze and task where both configurations of a comparison ran: its
+/// maze, its task, X's scores and Y's.
+type Stratum<'a> = (&'a str, &'a str, &'a [f64], &'a [f64]);
+
+/// The strata where both `x` and `y` ran, in maze and task order.
+fn paired_strata<'a>(s: &'a Scores, x: &str, y: &str) -> Vec<Stratum<'a>> {
+    s.iter()
+        .filter(|((_, _, c), _)| c == x)
+        .filter_map(|((m, t, _), v)| {
+            let w = s.get(&(m.clone(), t.clone(), y.to_string()))?;
+            Some((m.as_str(), t.as_str(), v.as_slice(), w.as_slice()))
+        })
+        .collect()
 }
 
 /// Every comparison the section reports: [`COMPARISONS`], then each
@@ -145,7 +144,8 @@ pub fn section(
          the runs; with fewer than four runs it is their mean) with a {:.0} % stratified bootstrap \
          confidence interval ({BOOTSTRAP_REPS} resamples of the runs, seeded), and the \
          probability of improvement P(X > Y) that a run of X scores above a run of Y on the same \
-         maze and task (ties count half), averaged over the mazes and tasks where both ran, then per maze and task. \
+         maze and task (ties count half), averaged over the mazes and tasks where both ran, then \
+         per maze and task. \
          Door-Key scores are success rates in [0, 1]. Agarwal et al. 2021, \"Deep Reinforcement \
          Learning at the Edge of the Statistical Precipice\". Every run's figures are in \
          `scores.csv` beside the summaries.\n",
@@ -188,9 +188,14 @@ pub fn section(
          | X over Y | mazes × tasks | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---:|---:|---|"
     );
     let rows = comparisons(&s, &display, &order);
+    let strata: Vec<Vec<Stratum>> = rows
+        .iter()
+        .map(|(x, y, _)| paired_strata(&s, x, y))
+        .collect();
     let mut any = false;
-    for (x, y, what) in &rows {
-        let (xs, ys) = paired_strata(&s, x, y);
+    for ((_, _, what), here) in rows.iter().zip(&strata) {
+        let xs: Vec<Vec<f64>> = here.iter().map(|(_, _, x, _)| x.to_vec()).collect();
+        let ys: Vec<Vec<f64>> = here.iter().map(|(_, _, _, y)| y.to_vec()).collect();
         let Some(e) = improvement_interval(&xs, &ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) else {
             continue;
         };
@@ -207,7 +212,7 @@ pub fn section(
     if !any {
         let _ = writeln!(
             md,
-            "| (no pair of configurations ran on the same maze and task) | | | |"
+            "| (no pair of configurations ran on the same maze and task) | | | |\n"
         );
         return md;
     }
@@ -218,19 +223,15 @@ pub fn section(
          runs).\n\n\
          | X over Y | maze | task | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---|---|---:|---|"
     );
-    for (x, y, what) in &rows {
-        for (m, t) in &cells {
-            let key = |c: &str| (m.clone(), t.clone(), c.to_string());
-            let (Some(xv), Some(yv)) = (s.get(&key(x)), s.get(&key(y))) else {
-                continue;
-            };
-            let (xs, ys) = (std::slice::from_ref(xv), std::slice::from_ref(yv));
-            if let Some(e) = improvement_interval(xs, ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) {
+    for ((_, _, what), here) in rows.iter().zip(&strata) {
+        for &(m, t, x, y) in here {
+            let (xs, ys) = ([x.to_vec()], [y.to_vec()]);
+            if let Some(e) = improvement_interval(&xs, &ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) {
                 let _ = writeln!(
                     md,
                     "| {what} | {m} | {t} | {} / {} | {} |",
-                    xv.len(),
-                    yv.len(),
+                    x.len(),
+                    y.len(),
                     interval_text(&e, 2)
                 );
             }
