@@ -83,15 +83,41 @@ const COMPARISONS: [(&str, &str, &str); 10] = [
 /// maze, its task, X's scores and Y's.
 type Stratum<'a> = (&'a str, &'a str, &'a [f64], &'a [f64]);
 
-/// The strata where both `x` and `y` ran, in maze and task order.
-fn paired_strata<'a>(s: &'a Scores, x: &str, y: &str) -> Vec<Stratum<'a>> {
-    s.iter()
+/// How the section names and sorts things: `display` names a configuration
+/// as the paper does, `config_rank` sorts configurations (Table 1's order)
+/// and `cell_rank` sorts (maze, task) cells (small to large, the paper's
+/// task order).
+pub struct Layout<D, C, K>
+where
+    D: Fn(&str) -> String,
+    C: Fn(&str) -> usize,
+    K: Fn(&str, &str) -> (usize, usize),
+{
+    /// A configuration's name in the paper.
+    pub display: D,
+    /// A configuration's sort key.
+    pub config_rank: C,
+    /// A (maze, task) cell's sort key.
+    pub cell_rank: K,
+}
+
+/// The strata where both `x` and `y` ran, sorted by `cell_rank`.
+fn paired_strata<'a>(
+    s: &'a Scores,
+    x: &str,
+    y: &str,
+    cell_rank: &impl Fn(&str, &str) -> (usize, usize),
+) -> Vec<Stratum<'a>> {
+    let mut strata: Vec<Stratum<'a>> = s
+        .iter()
         .filter(|((_, _, c), _)| c == x)
         .filter_map(|((m, t, _), v)| {
             let w = s.get(&(m.clone(), t.clone(), y.to_string()))?;
             Some((m.as_str(), t.as_str(), v.as_slice(), w.as_slice()))
         })
-        .collect()
+        .collect();
+    strata.sort_by_key(|(m, t, _, _)| cell_rank(m, t));
+    strata
 }
 
 /// Every comparison the section reports: [`COMPARISONS`], then each
@@ -128,14 +154,27 @@ fn interval_text(e: &Estimate, digits: usize) -> String {
     )
 }
 
-/// The Markdown section; `display` names a configuration as the paper
-/// does, `order` sorts configurations (Table 1's order).
-pub fn section(
-    runs: &[RunResult],
-    display: impl Fn(&str) -> String,
-    order: impl Fn(&str) -> usize,
-) -> String {
-    let s = scores_of(runs);
+/// The Markdown section over the runs' test scores.
+pub fn section<D, C, K>(runs: &[RunResult], layout: &Layout<D, C, K>) -> String
+where
+    D: Fn(&str) -> String,
+    C: Fn(&str) -> usize,
+    K: Fn(&str, &str) -> (usize, usize),
+{
+    section_of(&scores_of(runs), layout)
+}
+
+fn section_of<D, C, K>(s: &Scores, layout: &Layout<D, C, K>) -> String
+where
+    D: Fn(&str) -> String,
+    C: Fn(&str) -> usize,
+    K: Fn(&str, &str) -> (usize, usize),
+{
+    let Layout {
+        display,
+        config_rank: order,
+        cell_rank,
+    } = layout;
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -154,6 +193,7 @@ pub fn section(
     let mut cells: Vec<(String, String)> =
         s.keys().map(|(m, t, _)| (m.clone(), t.clone())).collect();
     cells.dedup();
+    cells.sort_by_key(|(m, t)| cell_rank(m, t));
     let _ = writeln!(
         md,
         "| maze | task | configuration | runs | IQM [95 % CI] |\n|---|---|---|---:|---|"
@@ -187,10 +227,10 @@ pub fn section(
         "\n### Probability of improvement\n\n\
          | X over Y | mazes × tasks | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---:|---:|---|"
     );
-    let rows = comparisons(&s, &display, &order);
+    let rows = comparisons(s, display, order);
     let strata: Vec<Vec<Stratum>> = rows
         .iter()
-        .map(|(x, y, _)| paired_strata(&s, x, y))
+        .map(|(x, y, _)| paired_strata(s, x, y, cell_rank))
         .collect();
     let mut any = false;
     for ((_, _, what), here) in rows.iter().zip(&strata) {
@@ -298,4 +338,82 @@ pub fn scores_csv(runs: &[RunResult], paper_iterations: u64) -> String {
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scores(cells: &[(&str, &str, &str, &[f64])]) -> Scores {
+        cells
+            .iter()
+            .map(|(m, t, c, v)| ((m.to_string(), t.to_string(), c.to_string()), v.to_vec()))
+            .collect()
+    }
+
+    /// An ordering that holds on one task, fails on another and ties on a
+    /// third pools to a coin flip; the per-task table must show each cell's
+    /// own value, in the paper's maze and task order (small before medium,
+    /// MultiGoal before Door-Key), not the names' alphabetical one.
+    #[test]
+    fn per_task_rows_show_each_cells_own_improvement_in_the_papers_order() {
+        let s = scores(&[
+            ("medium", "multigoal", "wn-pivotal-init", &[2.0]),
+            ("medium", "multigoal", "wn-random-init", &[2.0]),
+            ("small", "doorkey", "wn-pivotal-init", &[0.1, 0.2]),
+            ("small", "doorkey", "wn-random-init", &[0.5, 0.6]),
+            ("small", "multigoal", "wn-pivotal-init", &[3.0, 4.0]),
+            ("small", "multigoal", "wn-random-init", &[1.0, 2.0]),
+        ]);
+        let rank = |names: &[&str], x: &str| names.iter().position(|n| *n == x).unwrap();
+        let md = section_of(
+            &s,
+            &Layout {
+                display: |c: &str| c.to_string(),
+                config_rank: |_: &str| 0,
+                cell_rank: |m: &str, t: &str| {
+                    (
+                        rank(&["small", "medium"], m),
+                        rank(&["multigoal", "doorkey"], t),
+                    )
+                },
+            },
+        );
+        let what = "V_p over V_rand (π_g init)";
+        // Pooled: the mean of 1, 0 and ½ over the three cells.
+        let pooled = md
+            .lines()
+            .find(|l| l.starts_with(&format!("| {what} | 3 |")))
+            .unwrap_or_else(|| panic!("no pooled row in\n{md}"));
+        assert!(pooled.contains("| 5 / 5 | 0.50 ["), "{pooled}");
+        // Per cell: every resample of a cell keeps X above (or below, or
+        // level with) Y, so each interval is its point.
+        let per_cell: Vec<&str> = md
+            .lines()
+            .filter(|l| l.starts_with(&format!("| {what} | ")) && *l != pooled)
+            .collect();
+        assert_eq!(
+            per_cell,
+            [
+                format!("| {what} | small | multigoal | 2 / 2 | 1.00 [1.00, 1.00] |"),
+                format!("| {what} | small | doorkey | 2 / 2 | 0.00 [0.00, 0.00] |"),
+                format!("| {what} | medium | multigoal | 1 / 1 | 0.50 [0.50, 0.50] |"),
+            ],
+            "{md}"
+        );
+        // The IQM table in the same order.
+        let cells: Vec<&str> = md
+            .lines()
+            .filter(|l| l.contains("| wn-random-init |"))
+            .collect();
+        assert_eq!(
+            cells,
+            [
+                "| small | multigoal | wn-random-init | 2 | 1.500 [1.000, 2.000] |",
+                "| small | doorkey | wn-random-init | 2 | 0.550 [0.500, 0.600] |",
+                "| medium | multigoal | wn-random-init | 1 | 2.000 [2.000, 2.000] |",
+            ],
+            "{md}"
+        );
+    }
 }

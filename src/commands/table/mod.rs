@@ -312,12 +312,25 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     }
 
     // The rliable protocol's aggregates.
-    md.push_str(&super::aggregate::section(&runs, display_config, |c| {
-        TABLE1_CONFIGS
-            .iter()
-            .position(|x| *x == c)
-            .unwrap_or(usize::MAX)
-    }));
+    md.push_str(&super::aggregate::section(
+        &runs,
+        &super::aggregate::Layout {
+            display: display_config,
+            config_rank: |c: &str| {
+                TABLE1_CONFIGS
+                    .iter()
+                    .position(|x| *x == c)
+                    .unwrap_or(usize::MAX)
+            },
+            cell_rank: |m: &str, t: &str| {
+                let rank = |names: &[&str], x: &str| {
+                    names.iter().position(|n| *n == x).unwrap_or(usize::MAX)
+                };
+                let tasks: Vec<&str> = TABLE1_TASKS.iter().copied().chain(["doorkey"]).collect();
+                (rank(&MAZES, m), rank(&tasks, t))
+            },
+        },
+    ));
 
     // What each cell cost.
     let _ = writeln!(
