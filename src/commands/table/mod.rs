@@ -20,7 +20,8 @@ mod paper;
 mod time_to_score;
 
 use self::paper::{
-    MAZES, PAPER_ITERATIONS, TABLE1_CONFIGS, TABLE1_TASKS, TABLE2_CONFIGS, paper1, paper2,
+    MAZES, PAPER_ITERATIONS, TABLE1_CONFIGS, TABLE1_TASKS, TABLE2_CONFIGS, TASKS, paper1, paper2,
+    rank,
 };
 
 /// `table` options.
@@ -316,19 +317,8 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         &runs,
         &super::aggregate::Layout {
             display: display_config,
-            config_rank: |c: &str| {
-                TABLE1_CONFIGS
-                    .iter()
-                    .position(|x| *x == c)
-                    .unwrap_or(usize::MAX)
-            },
-            cell_rank: |m: &str, t: &str| {
-                let rank = |names: &[&str], x: &str| {
-                    names.iter().position(|n| *n == x).unwrap_or(usize::MAX)
-                };
-                let tasks: Vec<&str> = TABLE1_TASKS.iter().copied().chain(["doorkey"]).collect();
-                (rank(&MAZES, m), rank(&tasks, t))
-            },
+            config_rank: |c: &str| rank(&TABLE1_CONFIGS, c),
+            cell_rank: |m: &str, t: &str| (rank(&MAZES, m), rank(&TASKS, t)),
         },
     ));
 
@@ -338,9 +328,8 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         "## Budget per cell\n\nMean training wall seconds per run (env steps per run: the budgets \
          above; training env-steps/s in brackets).\n"
     );
-    let tasks_here: Vec<&str> = TABLE1_TASKS
+    let tasks_here: Vec<&str> = TASKS
         .iter()
-        .chain(std::iter::once(&"doorkey"))
         .copied()
         .filter(|t| runs.iter().any(|r| r.task == *t))
         .collect();

@@ -19,6 +19,16 @@ pub const TABLE1_CONFIGS: [&str; 10] = [
 /// Table 1's tasks.
 pub const TABLE1_TASKS: [&str; 3] = ["multigoal", "multigoal-sparse", "multigoal-stochastic"];
 
+/// Every task in the order the tables list them: Table 1's, then Door-Key
+/// (Table 2).
+pub(super) const TASKS: [&str; 4] = [TABLE1_TASKS[0], TABLE1_TASKS[1], TABLE1_TASKS[2], "doorkey"];
+
+/// A name's place in `names` (after all of them if absent): the sort key
+/// of mazes, tasks and configurations in the tables.
+pub(super) fn rank(names: &[&str], x: &str) -> usize {
+    names.iter().position(|n| *n == x).unwrap_or(usize::MAX)
+}
+
 /// Table 2's columns, in the paper's order.
 pub const TABLE2_CONFIGS: [&str; 7] = [
     "wn-all-init",
