@@ -365,16 +365,17 @@ pub(super) fn section(
                 here.insert(0, (name.clone(), rs.iter().collect()));
                 Some(name)
             }
-            Some((dir, rs)) => {
-                notes.push(format!(
-                    "{m} {t}: every seed of this grid's own A2C reached the threshold within \
-                     the grid's budget, so its row is the reference, not the longer A2C \
-                     `{dir}`{}.",
-                    repeat_note(rs)
-                ));
+            unused => {
+                if let Some((dir, rs)) = unused {
+                    notes.push(format!(
+                        "{m} {t}: every seed of this grid's own A2C reached the threshold \
+                         within the grid's budget, so its row is the reference, not the longer \
+                         A2C `{dir}`{}.",
+                        repeat_note(rs)
+                    ));
+                }
                 grid_a2c.map(|_| display_config("a2c"))
             }
-            None => grid_a2c.map(|_| display_config("a2c")),
         };
         let reference_times = reference_name.as_ref().map(|name| {
             let rs = &here.iter().find(|(c, _)| c == name).expect("inserted").1;
