@@ -354,6 +354,40 @@ impl Layout {
             .collect()
     }
 
+    /// The maze's structure without a task's state: every door open, keys
+    /// and balls taken away (floor). One world graph per maze serves every
+    /// task on it (Shang et al. 2019, section 4.3, "Execution"): its nodes
+    /// and edges are found on this layout, so a route through a door
+    /// exists, and a route is refused at run time only while a cell on it
+    /// is blocked (a closed door, a key lying there).
+    pub fn structural(&self) -> Layout {
+        let cells = self
+            .cells
+            .iter()
+            .map(|&c| match Object::from_code(c) {
+                Some(o) if o.is_door() => Object::DoorOpen as u8,
+                Some(Object::Key | Object::Ball) => Object::Floor as u8,
+                _ => c,
+            })
+            .collect();
+        Layout {
+            name: self.name.clone(),
+            width: self.width,
+            height: self.height,
+            cells,
+            start: self.start,
+        }
+    }
+
+    /// Cells holding a task's objects the agent acts on (keys, doors that
+    /// are not open), in cell order.
+    pub fn object_cells(&self) -> Vec<u32> {
+        (0..self.cells.len())
+            .filter(|&i| Object::from_code(self.cells[i]).is_some_and(Object::is_acted_on))
+            .map(|i| i as u32)
+            .collect()
+    }
+
     /// The layout as text, in the file format (agent drawn at its start).
     pub fn to_text(&self) -> String {
         let mut s = String::with_capacity((self.width + 1) * self.height);
@@ -449,6 +483,21 @@ mod tests {
     fn kind(text: &str) -> (usize, usize, LayoutErrorKind) {
         let e = Layout::parse("t", text).expect_err("must be refused");
         (e.line, e.col, e.kind)
+    }
+
+    #[test]
+    fn the_structural_layout_opens_doors_and_clears_keys_and_keeps_walls() {
+        let dk = Maze::Small.layout(true);
+        let s = dk.structural();
+        let (door, key) = (dk.cell_index(6, 9), dk.cell_index(9, 2));
+        assert_eq!(dk.object_cells(), vec![key as u32, door as u32]);
+        assert_eq!(s.cells[door], Object::DoorOpen as u8);
+        assert_eq!(s.cells[key], Object::Floor as u8);
+        assert!(s.object_cells().is_empty());
+        // The Door-Key variant's own walls stay: the structure of *its* maze.
+        let walls = |l: &Layout| l.cells.iter().filter(|&&c| c == Object::Wall as u8).count();
+        assert_eq!(walls(&s), walls(&dk));
+        assert_eq!(s.structural(), s);
     }
 
     #[test]

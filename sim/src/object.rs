@@ -144,6 +144,15 @@ impl Object {
         )
     }
 
+    /// A task object the agent changes by acting on it rather than by
+    /// stepping onto it: a key (pickup) or a door that is not open
+    /// (toggle). Such a cell is reached as a goal when the agent's action
+    /// changes it (Door-Key's object goals, `learner::hrl::worker`).
+    #[inline]
+    pub fn is_acted_on(self) -> bool {
+        matches!(self, Object::Key | Object::DoorClosed | Object::DoorLocked)
+    }
+
     /// MiniGrid's `can_overlap`: the agent may stand on it (balls are
     /// collected on contact in MultiGoal tasks, see `env`).
     #[inline]
