@@ -184,6 +184,10 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     );
     let w = world(&a, seed);
     let (layout, env_cfg) = w.build()?;
+    // One world graph per maze serves every task on it: it is found on the
+    // maze's structure, doors passable and no key (a Door-Key layout's
+    // door is refused at run time only while it is closed).
+    let layout = layout.structural();
     let dir = a.run_dir.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, cfg.seed))
     });

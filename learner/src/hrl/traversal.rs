@@ -71,6 +71,9 @@ pub struct Traversal {
     execution: Execution,
     /// The target cell `g_w`.
     target: u32,
+    /// The target is an object the agent acts on (a key, a closed door):
+    /// the route ends on the cell in front of it, facing it.
+    stops_in_front: bool,
     /// Replay: the actions and the cell after each.
     actions: Vec<u8>,
     cells: Vec<u32>,
@@ -84,11 +87,12 @@ pub struct Traversal {
     steps: u32,
 }
 
-/// Door cells on a route that are not open in the observed grid.
-fn closed_door_on(route: &Route, grid: &[u8]) -> Option<u32> {
-    route.cells().iter().map(|c| c.0).find(|&c| {
-        Object::from_code(grid[c as usize]).is_some_and(|o| o.is_door() && o != Object::DoorOpen)
-    })
+/// True when the observed `grid` blocks the agent from entering `cell`:
+/// a door that is not open, or a key lying there (the world graph is found
+/// on the maze's structure, [`sim::Layout::structural`], so its routes pass
+/// doors and keys' cells).
+fn blocked(grid: &[u8], cell: u32) -> bool {
+    Object::from_code(grid[cell as usize]).is_some_and(Object::is_acted_on)
 }
 
 impl Traversal {
@@ -122,14 +126,28 @@ impl Traversal {
         }
         match execution {
             Execution::Replay => {
-                if closed_door_on(route, grid).is_some() {
+                // A route through a cell blocked now (a closed door, the
+                // key) is not taken (section 4.3, "Execution"); one that
+                // ends on the blocked target stops in front of it, facing
+                // it, so the Worker can act on it (object goals).
+                let mut cells: Vec<u32> = route.cells().iter().map(|c| c.0).collect();
+                let mut actions = route.actions().to_vec();
+                let stops_in_front = blocked(grid, target);
+                if stops_in_front {
+                    while cells.last() == Some(&target) {
+                        cells.pop();
+                        actions.pop();
+                    }
+                }
+                if actions.is_empty() || cells.iter().any(|&c| blocked(grid, c)) {
                     return None;
                 }
                 Some(Traversal {
                     execution,
                     target,
-                    actions: route.actions().to_vec(),
-                    cells: route.cells().iter().map(|c| c.0).collect(),
+                    stops_in_front,
+                    actions,
+                    cells,
                     next: 0,
                     waypoints: Vec::new(),
                     limits: Vec::new(),
@@ -151,6 +169,7 @@ impl Traversal {
                 Some(Traversal {
                     execution,
                     target,
+                    stops_in_front: false,
                     actions: Vec::new(),
                     cells: Vec::new(),
                     next: 0,
@@ -172,6 +191,12 @@ impl Traversal {
     /// The target cell `g_w`.
     pub fn target(&self) -> u32 {
         self.target
+    }
+
+    /// True when the route ends in front of its target, an object to act
+    /// on, rather than on it.
+    pub fn stops_in_front(&self) -> bool {
+        self.stops_in_front
     }
 
     /// Actions taken so far.
@@ -223,7 +248,7 @@ impl Traversal {
                 if cell != expected {
                     Progress::Stopped
                 } else if self.next == self.actions.len() {
-                    if cell == self.target {
+                    if cell == self.target || self.stops_in_front {
                         Progress::Arrived
                     } else {
                         Progress::Stopped
@@ -299,8 +324,12 @@ pub fn book_step(
     match progress {
         Progress::Continue => {}
         Progress::Arrived => {
+            // In front of an object goal, `g_w` is paid when the Worker
+            // acts on it.
+            if !t.stops_in_front() {
+                goal.wide_paid = true;
+            }
             *slot = None;
-            goal.wide_paid = true;
             if cell == goal.narrow {
                 step.interval_over = true;
                 step.reached = true;
@@ -717,6 +746,60 @@ mod tests {
             }
         }
         assert_eq!(env.cell() as u32, right);
+    }
+
+    /// The world graph of the small Door-Key maze, found on its structure
+    /// (the door passable, no key): the route through the door exists, is
+    /// refused while the door is locked and taken once it is open; a route
+    /// to the key stops in front of it, facing it, so a pickup takes it.
+    #[test]
+    fn one_graph_serves_door_key_its_door_route_waits_for_the_door_and_the_key_route_faces_the_key()
+     {
+        let dk = Maze::Small.layout(true);
+        let at = |x, y| dk.cell_index(x, y) as u32;
+        let (left, right, door, key) = (at(4, 9), at(8, 9), at(6, 9), at(9, 2));
+        let cfg = PlannerConfig {
+            candidates: CandidateSet::Given,
+            seed: 3,
+            task: Task::MultiGoal,
+            ..PlannerConfig::default()
+        };
+        let structure = dk.structural();
+        let nodes = planner::pivotal::nodes_from_cells(&structure, &[left, right, key]);
+        let g = WorldGraph::build(&structure, &cfg, &nodes).expect("graph");
+        let mut route = Route::default();
+        let mut env = env_at(&dk, Task::DoorKey, left, 0);
+        let (mut cells, mut meta) = (vec![0u8; dk.cells.len()], [EnvMeta::EMPTY]);
+        let mut finals = vec![0u8; dk.cells.len()];
+        env.observe(&mut cells, &mut meta[0]);
+        let plan = |cells: &[u8], meta: &[EnvMeta], target: u32, route: &mut Route| {
+            Traversal::plan(&g, &view(&dk, cells, meta), 0, target, Execution::Replay, route)
+        };
+        assert_eq!(cells[door as usize], Object::DoorLocked as u8);
+        assert!(plan(&cells, &meta, right, &mut route).is_none(), "the door is locked");
+        // The same route once the door is open: through the door cell.
+        let mut open = cells.clone();
+        open[door as usize] = Object::DoorOpen as u8;
+        let through = plan(&open, &meta, right, &mut route).expect("a route once the door is open");
+        assert!(through.cells.contains(&door) && !through.stops_in_front());
+        // To the key: the route ends in front of it, facing it.
+        let mut t = plan(&cells, &meta, key, &mut route).expect("a route to the key");
+        assert!(t.stops_in_front() && !t.cells.contains(&key));
+        let mut arrived = false;
+        while let Some(a) = t.next_action() {
+            env.step(a, &mut cells, &mut finals, &mut meta[0]);
+            match t.advance(env.cell() as u32, meta[0].done()) {
+                Progress::Continue => {}
+                p => {
+                    arrived = p == Progress::Arrived;
+                    break;
+                }
+            }
+        }
+        assert!(arrived, "the replay follows the route to the cell before the key");
+        env.step(sim::action::PICKUP, &mut cells, &mut finals, &mut meta[0]);
+        assert_eq!(meta[0].carrying, Object::Key as u8, "facing the key, pickup takes it");
+        assert_eq!(cells[key as usize], Object::Floor as u8);
     }
 
     #[test]

@@ -210,51 +210,63 @@ pub fn load_gcp(dir: &Path, layout: &Layout) -> anyhow::Result<GoalConditionedPo
     Ok(gcp)
 }
 
-/// The world graph over the candidate set on the task's layout: `V_p` as
-/// discovered (re-walked on the Door-Key layout when the task's layout
-/// differs), or `V_rand` of the same size with edges formed the same way
-/// (random walks, then `π_g` refinement).
+/// The world graph over the candidate set on the task's layout. One world
+/// graph per maze serves every task on it (section 4.3, "Execution"): it
+/// is found on the layout's structure ([`Layout::structural`]: doors open,
+/// no key), so a route through a door exists and traversal refuses it only
+/// while the door is closed. `V_p` as discovered (kept as it is when it
+/// was discovered on that structure; otherwise its nodes standable there,
+/// re-walked), or `V_rand` of the same size with edges formed the same way
+/// (random walks, then `π_g` refinement); with `object_goals`, the cells
+/// of the task's objects (keys, closed doors) join the nodes, so traversal
+/// can bring the agent in front of them.
 pub fn world_graph_for(
     dir: &Path,
     layout: &Layout,
-    task: Task,
     candidates: Candidates,
+    object_goals: bool,
     seed: u64,
     gcp: &mut GoalConditionedPolicy,
 ) -> anyhow::Result<planner::WorldGraph> {
     let path = dir.join(GRAPH_FILE);
     let discovered = planner::WorldGraph::load(&path)
         .with_context(|| format!("cannot load the world graph {}", path.display()))?;
-    let same_layout = discovered.layout().cells == layout.cells;
+    let structure = layout.structural();
+    let same_structure = discovered.layout().cells == structure.cells;
     let pivotal: Vec<u32> = discovered
         .nodes()
         .iter()
         .map(|c| c.0)
         .filter(|&c| {
             planner::pivotal::is_node_object(
-                layout.object(c as usize % layout.width, c as usize / layout.width),
+                structure.object(c as usize % structure.width, c as usize / structure.width),
             )
         })
         .collect();
-    if candidates == Candidates::Pivotal && same_layout && task != Task::DoorKey {
+    let objects = if object_goals {
+        layout.object_cells()
+    } else {
+        Vec::new()
+    };
+    if candidates == Candidates::Pivotal && same_structure && objects.is_empty() {
         return Ok(discovered);
     }
-    let nodes = match candidates {
-        Candidates::Pivotal => planner::pivotal::nodes_from_cells(layout, &pivotal),
-        _ => planner::pivotal::v_rand(layout, pivotal.len(), seed)?,
+    let cells: Vec<u32> = match candidates {
+        Candidates::Pivotal => pivotal,
+        _ => planner::pivotal::v_rand(&structure, pivotal.len(), seed)?
+            .iter()
+            .map(|c| c.0)
+            .collect(),
     };
+    let nodes = planner::pivotal::nodes_from_cells(&structure, &[cells, objects].concat());
     let cfg = planner::PlannerConfig {
         candidates: planner::CandidateSet::Given,
         seed,
-        task: if task == Task::DoorKey {
-            Task::DoorKey
-        } else {
-            Task::MultiGoal
-        },
+        task: Task::MultiGoal,
         shorten: false,
         ..planner::PlannerConfig::default()
     };
-    let mut graph = planner::WorldGraph::build(layout, &cfg, &nodes)?;
+    let mut graph = planner::WorldGraph::build(&structure, &cfg, &nodes)?;
     crate::edge_refinement::refine_with_gcp(&mut graph, gcp)?;
     Ok(graph)
 }
@@ -275,8 +287,8 @@ pub fn build_agent(
                 Some(world_graph_for(
                     dir,
                     layout,
-                    task,
                     cfg.candidates,
+                    cfg.object_goals,
                     seed,
                     &mut gcp,
                 )?)
