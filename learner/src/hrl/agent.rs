@@ -35,6 +35,9 @@ pub struct HrlAgent {
     pub(super) width: usize,
     /// The Manager horizon `c`.
     pub(super) horizon: u32,
+    /// The environment action of each Worker policy output
+    /// ([`AgentConfig::worker_actions`]).
+    pub(super) actions: &'static [u8],
     /// The Worker (the baseline for A2C).
     pub(super) worker: WorkerSide,
     /// The Manager (FN, WN).
@@ -89,7 +92,7 @@ impl HrlAgent {
         }
         let hierarchical = cfg.kind != AgentKind::A2c;
         let (worker, manager) = crate::seeding::init_seeded(seed, || {
-            let worker = WorkerSide::new(cfg, width, height, task.num_actions());
+            let worker = WorkerSide::new(cfg, width, height, cfg.worker_actions(task).len());
             let manager =
                 hierarchical.then(|| ManagerSide::new(cfg, layout, inputs.graph.as_ref()));
             (worker, manager)
@@ -116,6 +119,7 @@ impl HrlAgent {
             task,
             width,
             horizon: cfg.horizon(),
+            actions: cfg.worker_actions(task),
             worker,
             manager,
             traverser,
@@ -242,7 +246,7 @@ impl HrlAgent {
     pub fn flops_per_env_step(&self, path: GradPath) -> f64 {
         let worker = crate::a2c::net::flops_per_env_step(
             self.worker.net.trunk(),
-            self.task.num_actions() as i64,
+            self.actions.len() as i64,
             path,
         );
         match &self.manager {

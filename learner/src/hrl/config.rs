@@ -139,6 +139,34 @@ pub struct AgentConfig {
     /// How the Worker books a step on which the task ended the episode
     /// before it reached `g_n` ([`WorkerTaskEnd`]).
     pub worker_task_end: WorkerTaskEnd,
+    /// Door-Key: the task's objects are goals (the paper is silent). The
+    /// key's and the locked door's cells join the wide-goal candidates
+    /// `V` (and the world graph's nodes, so traversal can bring the agent
+    /// in front of them), and a goal on such a cell is reached by acting
+    /// on it — picking the key up, opening the door — not by stepping onto
+    /// it ([`super::worker`]). Off: goals are cells to step onto and `V`
+    /// holds standable cells only. Changes nothing on a layout without
+    /// keys or closed doors.
+    pub object_goals: bool,
+    /// Door-Key's action set ([`DoorKeyActions`]).
+    pub door_key_actions: DoorKeyActions,
+    /// The Worker's share `α` of the task's own rewards (the door, the
+    /// exit, balls; not the step penalty), added to its goal rewards as
+    /// FeUdal Networks' Worker is paid `r^I + α r` (Vezhnevets et al.
+    /// 2017, eq. 6). 0: the paper's Worker, paid by the Manager alone.
+    pub worker_task_share: f32,
+}
+
+/// The actions of the Worker (and the baseline) on Door-Key.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DoorKeyActions {
+    /// The paper's: Door-Key "adds new actions (`pick` and `open`)" to
+    /// left, right and forward — MiniGrid's pickup and toggle; five in all.
+    #[default]
+    PickOpen,
+    /// MiniGrid's six: pickup, drop and toggle (drop can only lose the key).
+    Minigrid,
 }
 
 impl Default for AgentConfig {
@@ -163,6 +191,9 @@ impl Default for AgentConfig {
             goal_map: true,
             goal_map_windows: true,
             worker_task_end: WorkerTaskEnd::default(),
+            object_goals: true,
+            door_key_actions: DoorKeyActions::default(),
+            worker_task_share: 0.0,
         }
     }
 }
@@ -185,6 +216,12 @@ impl AgentConfig {
         if self.conv_channels.iter().any(|&c| c < 1) || self.hidden < 1 {
             return Err(ConfigError::new("hidden", "network sizes must be ≥ 1"));
         }
+        if !(self.worker_task_share.is_finite() && self.worker_task_share >= 0.0) {
+            return Err(ConfigError::new(
+                "worker_task_share",
+                format!("{} must be a finite share ≥ 0", self.worker_task_share),
+            ));
+        }
         if !self.goal_reward.is_finite() || !self.step_penalty.is_finite() {
             return Err(ConfigError::new("goal_reward", "rewards must be finite"));
         }
@@ -199,6 +236,18 @@ impl AgentConfig {
             ));
         }
         Ok(())
+    }
+
+    /// The environment action of each of the Worker's policy outputs on
+    /// `task` (MiniGrid numbering): left, right, forward on the MultiGoal
+    /// tasks; then pickup and toggle (or pickup, drop, toggle) on Door-Key.
+    pub fn worker_actions(&self, task: Task) -> &'static [u8] {
+        use sim::action::{DROP, FORWARD, LEFT, PICKUP, RIGHT, TOGGLE};
+        match (task.is_multigoal(), self.door_key_actions) {
+            (true, _) => &[LEFT, RIGHT, FORWARD],
+            (false, DoorKeyActions::PickOpen) => &[LEFT, RIGHT, FORWARD, PICKUP, TOGGLE],
+            (false, DoorKeyActions::Minigrid) => &[LEFT, RIGHT, FORWARD, PICKUP, DROP, TOGGLE],
+        }
     }
 
     /// The Manager horizon `c`.

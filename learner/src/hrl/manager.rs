@@ -157,10 +157,18 @@ impl ManagerSide {
     ) -> ManagerSide {
         let (width, height) = (layout.width, layout.height);
         let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
-            (AgentKind::WideNarrow, Candidates::All) => planner::pivotal::v_all(layout)
-                .iter()
-                .map(|c| c.0)
-                .collect(),
+            // V_all: every standable cell, and with object goals the
+            // cells of the task's objects (the key, closed doors).
+            (AgentKind::WideNarrow, Candidates::All) => {
+                let mut v: Vec<u32> = planner::pivotal::v_all(layout)
+                    .iter()
+                    .map(|c| c.0)
+                    .collect();
+                if cfg.object_goals {
+                    v.extend(layout.object_cells());
+                }
+                v
+            }
             (AgentKind::WideNarrow, _) => graph
                 .map(|g| g.nodes().iter().map(|c| c.0).collect())
                 .unwrap_or_default(),
@@ -305,9 +313,15 @@ impl ManagerSide {
             c.manager_reset = false;
             c.goal = WorkerGoal::new(gw, gn, obs.meta[e].cell(self.width) as u32);
             made.count += 1;
-            let named = obs.env_cells(e).get(gn as usize).copied();
+            let grid = obs.env_cells(e);
+            let named = grid.get(gn as usize).copied();
             made.exit_goals += usize::from(named == Some(sim::Object::Exit as u8));
             made.ball_goals += usize::from(named == Some(sim::Object::Ball as u8));
+            // Door-Key: either goal on the key, or on a door not yet open.
+            let on = |o: sim::Object| [gw, gn].iter().any(|&g| grid.get(g as usize) == Some(&(o as u8)));
+            made.key_goals += usize::from(on(sim::Object::Key));
+            made.door_goals +=
+                usize::from(on(sim::Object::DoorLocked) || on(sim::Object::DoorClosed));
         }
         // A fresh goal episode for the Worker.
         let fresh: Vec<bool> = (0..ctl.envs.len()).map(|e| who.contains(&e)).collect();

@@ -32,7 +32,7 @@ use super::controller::Controller;
 use super::stats::{EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, reached_exit};
 use super::steering::Leg;
 use super::traversal::{self, Execution, Traversal};
-use super::worker::{EpisodeEnd, WorkerStep};
+use super::worker::{Arrival, EpisodeEnd, WorkerStep};
 use crate::a2c::LossFigures;
 use crate::a2c::input::mask;
 use crate::a2c::net::LstmState;
@@ -41,8 +41,14 @@ use crate::error::LearnerError;
 
 /// What the agent chose before a batch step.
 struct Acted {
-    /// Each environment's action.
+    /// Each environment's action (MiniGrid numbering).
     actions: Vec<u8>,
+    /// The Worker's policy output sampled for each environment (its index
+    /// into [`HrlAgent::actions`]), which its rollout learns from.
+    choices: Vec<u8>,
+    /// Each environment's goal cells `(g_w, g_n)` and the objects lying
+    /// there before the step (object goals are reached by acting on them).
+    goal_objects: Vec<[(u32, u8); 2]>,
     /// The Worker's core state after the step.
     state: LstmState,
     /// `π_g` steered the step and it is recorded for its fine-tuning.
@@ -101,7 +107,20 @@ impl HrlAgent {
         let marks = self.worker.goal_marks(ctl.goals());
         let out = self.worker.act(obs, &marks, &ctl.worker_state, train);
         let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
-        let mut actions = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
+        let choices = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
+        let mut actions: Vec<u8> = choices
+            .iter()
+            .map(|&i| self.actions[i as usize])
+            .collect();
+        let goal_objects = ctl
+            .goals()
+            .enumerate()
+            .map(|(e, g)| {
+                let grid = obs.env_cells(e);
+                let at = |c: u32| (c, grid.get(c as usize).copied().unwrap_or(0));
+                [at(g.wide), at(g.narrow)]
+            })
+            .collect();
         let traversals: Vec<Option<&Traversal>> =
             ctl.envs.iter().map(|c| c.traversal.as_ref()).collect();
         let steered = self.traverser.actions(
@@ -114,6 +133,8 @@ impl HrlAgent {
         )?;
         Ok(Acted {
             actions,
+            choices,
+            goal_objects,
             state: out.state,
             steered,
         })
@@ -191,13 +212,24 @@ impl HrlAgent {
                 stats.reached += usize::from(s.reached);
                 interval_over |= s.interval_over;
             } else {
-                let s = self.book_worker_step(ctl, &obs, e, cell, end);
+                let arrival = if self.cfg.object_goals {
+                    let grid = if ended { obs.env_final_cells(e) } else { obs.env_cells(e) };
+                    let before = acted.goal_objects[e];
+                    let after = before.map(|(c, o)| grid.get(c as usize).copied().unwrap_or(o));
+                    Arrival::of_step(cell, before, after)
+                } else {
+                    Arrival::walked(cell)
+                };
+                let s = self.book_worker_step(ctl, &obs, e, arrival, end);
                 stats.reached += usize::from(s.reached);
                 interval_over |= s.interval_over;
                 if s.bootstrap {
                     book.cut_worker.push(e);
                 }
-                book.rewards[e] = s.reward;
+                // FeUdal's `r^I + α r`: the task's own payoffs, not its
+                // step penalty (the Worker pays its own).
+                book.rewards[e] = s.reward
+                    + self.cfg.worker_task_share * (m.reward - sim::task::STEP_PENALTY);
                 book.dones[e] = s.done;
                 book.weights[e] = 1.0;
             }
@@ -233,13 +265,30 @@ impl HrlAgent {
             }
             self.worker
                 .rollout
-                .record(&acted.actions, &book.rewards, &book.dones, &book.weights);
+                .record(&self.recorded(&acted), &book.rewards, &book.dones, &book.weights);
         }
         if acted.steered {
             self.traverser.book_steered(&acted.actions, &book.legs);
         }
         ctl.worker_state = acted.state.reset_done(&mask(&book.dones));
         Ok(())
+    }
+
+    /// The policy output the rollout records for each environment: that of
+    /// the action taken (a traversal's too, recorded with weight 0), or the
+    /// Worker's sample where the taken action is none of its outputs.
+    fn recorded(&self, acted: &Acted) -> Vec<u8> {
+        acted
+            .actions
+            .iter()
+            .zip(&acted.choices)
+            .map(|(&a, &choice)| {
+                self.actions
+                    .iter()
+                    .position(|&b| b == a)
+                    .map_or(choice, |i| i as u8)
+            })
+            .collect()
     }
 
     /// Books the Worker's step in environment `e` of `obs`, which led the
@@ -251,12 +300,12 @@ impl HrlAgent {
         ctl: &mut Controller,
         obs: &ObsView<'_>,
         e: usize,
-        cell: u32,
+        arrival: Arrival,
         end: EpisodeEnd,
     ) -> WorkerStep {
         let c = &mut ctl.envs[e];
-        let mut s = c.goal.book(
-            cell,
+        let mut s = c.goal.book_arrival(
+            arrival,
             end,
             self.horizon,
             self.cfg.goal_reward,
@@ -268,7 +317,13 @@ impl HrlAgent {
                 HandOver::PaysWideGoal => self.cfg.goal_reward,
                 HandOver::Unpaid => 0.0,
             };
-            c.goal.hand_over(&mut s, pay);
+            if c.traversal.as_ref().is_some_and(Traversal::stops_in_front) {
+                // Towards an object goal: the route ends facing it, and the
+                // Worker is paid when it acts on it, not for the hand-over.
+                s.done = true;
+            } else {
+                c.goal.hand_over(&mut s, pay);
+            }
         }
         s
     }
@@ -284,7 +339,7 @@ impl HrlAgent {
         let mut ctl = std::mem::replace(&mut self.ctl, empty);
         self.worker.rollout.start(&ctl.worker_state);
         self.traverser.start_fine_tuning(ctl.steer_state.as_ref());
-        let mut counts = StepCounts::default();
+        let mut counts = StepCounts::for_task(self.task);
         for _ in 0..self.cfg.rollout_len {
             self.step_batch(&mut ctl, env, true, None, &mut counts)?;
         }
@@ -324,7 +379,7 @@ impl HrlAgent {
         let mut returns = vec![0f32; n];
         let mut lengths = vec![0u32; n];
         let mut success = vec![false; n];
-        let mut counts = StepCounts::default();
+        let mut counts = StepCounts::for_task(self.task);
         let mut trace = trace.map(|t| {
             *t = EpisodeTrace::default();
             let obs = env.observe();

@@ -42,6 +42,15 @@ pub struct IterationStats {
     /// Share of the episodes whose final grid has an open door (Door-Key:
     /// the agent opened the locked one).
     pub door_share: f64,
+    /// Door-Key: share of the episodes in which the key was picked up (it
+    /// is carried at the end, or no longer lies in the final grid).
+    pub key_taken_share: f64,
+    /// Door-Key: share of the Manager's decisions that named the key's
+    /// cell as `g_w` or `g_n`.
+    pub key_goal_share: f64,
+    /// Door-Key: share of the decisions that named a door that was not
+    /// open as `g_w` or `g_n`.
+    pub door_goal_share: f64,
 }
 
 /// The result of an evaluation: one episode per environment.
@@ -99,6 +108,10 @@ pub(super) struct StepCounts {
     pub(super) with_key: usize,
     /// Those whose final grid has an open door.
     pub(super) door_open: usize,
+    /// Door-Key: those in which the key was picked up.
+    pub(super) key_taken: usize,
+    /// The task has a key to take (Door-Key): `key_taken` counts.
+    pub(super) door_key: bool,
     /// Manager intervals that ended.
     pub(super) intervals: usize,
     /// Intervals in which `g_n` was reached.
@@ -111,6 +124,10 @@ pub(super) struct StepCounts {
     pub(super) exit_goals: usize,
     /// Decisions whose `g_n` held a ball.
     pub(super) ball_goals: usize,
+    /// Decisions naming the key.
+    pub(super) key_goals: usize,
+    /// Decisions naming a door not yet open.
+    pub(super) door_goals: usize,
 }
 
 impl StepCounts {
@@ -119,6 +136,16 @@ impl StepCounts {
         self.decisions += d.count;
         self.exit_goals += d.exit_goals;
         self.ball_goals += d.ball_goals;
+        self.key_goals += d.key_goals;
+        self.door_goals += d.door_goals;
+    }
+
+    /// Counts for `task`'s episodes (Door-Key's key is counted).
+    pub(super) fn for_task(task: sim::Task) -> StepCounts {
+        StepCounts {
+            door_key: task == sim::Task::DoorKey,
+            ..StepCounts::default()
+        }
     }
 
     /// Counts environment `e`'s step that produced `obs`; `ended`: the step
@@ -130,10 +157,13 @@ impl StepCounts {
             self.successes += usize::from(reached_exit(obs, e));
             self.with_key += usize::from(obs.meta[e].end_carrying == sim::Object::Key as u8);
             let cells = obs.width * obs.height;
-            self.door_open += usize::from(
-                obs.final_cells
-                    .get(e * cells..(e + 1) * cells)
-                    .is_some_and(|g| g.contains(&(sim::Object::DoorOpen as u8))),
+            let last = obs.final_cells.get(e * cells..(e + 1) * cells);
+            self.door_open +=
+                usize::from(last.is_some_and(|g| g.contains(&(sim::Object::DoorOpen as u8))));
+            self.key_taken += usize::from(
+                self.door_key
+                    && (obs.meta[e].end_carrying == sim::Object::Key as u8
+                        || last.is_some_and(|g| !g.contains(&(sim::Object::Key as u8)))),
             );
         }
         self.steps += 1;
@@ -170,6 +200,9 @@ impl StepCounts {
             ball_goal_share: self.ball_goals as f64 / self.decisions.max(1) as f64,
             key_share: self.with_key as f64 / self.episodes.max(1) as f64,
             door_share: self.door_open as f64 / self.episodes.max(1) as f64,
+            key_taken_share: self.key_taken as f64 / self.episodes.max(1) as f64,
+            key_goal_share: self.key_goals as f64 / self.decisions.max(1) as f64,
+            door_goal_share: self.door_goals as f64 / self.decisions.max(1) as f64,
         }
     }
 }
@@ -245,6 +278,10 @@ pub(super) struct Decisions {
     pub(super) exit_goals: usize,
     /// Decisions whose narrow goal `g_n` holds a ball.
     pub(super) ball_goals: usize,
+    /// Decisions with `g_w` or `g_n` on the key.
+    pub(super) key_goals: usize,
+    /// Decisions with `g_w` or `g_n` on a door not yet open.
+    pub(super) door_goals: usize,
 }
 
 #[cfg(test)]
@@ -265,7 +302,7 @@ mod tests {
             ..EnvConfig::for_task(Task::DoorKey, &layout)
         };
         let mut env = InProcess::new(layout, cfg, 2, 0, 1).expect("env");
-        let mut counts = StepCounts::default();
+        let mut counts = StepCounts::for_task(Task::DoorKey);
         // Environment 0 picks up the key, steps onto its cell, opens the
         // door; environment 1 turns on the spot.
         for a in [action::PICKUP, action::FORWARD, action::TOGGLE] {
@@ -278,5 +315,6 @@ mod tests {
         let s = counts.iteration(LossFigures::default(), LossFigures::default());
         assert_eq!(s.episodes, 2, "the step limit ends both episodes");
         assert_eq!((s.key_share, s.door_share), (0.5, 0.5));
+        assert_eq!(s.key_taken_share, 0.5);
     }
 }

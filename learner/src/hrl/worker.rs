@@ -81,6 +81,46 @@ pub struct WorkerGoal {
     pub last_cell: u32,
 }
 
+/// Where a Worker step led the agent, and whether it acted on an object
+/// goal: changed the object lying on `g_w` or `g_n` (a key picked up, a
+/// door opened), which reaches that goal ([`AgentConfig::object_goals`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Arrival {
+    /// The cell the action led the agent to.
+    pub cell: u32,
+    /// The step changed the object on `g_w`.
+    pub acted_on_wide: bool,
+    /// The step changed the object on `g_n`.
+    pub acted_on_narrow: bool,
+}
+
+impl Arrival {
+    /// A step that acted on no object goal.
+    pub fn walked(cell: u32) -> Arrival {
+        Arrival {
+            cell,
+            acted_on_wide: false,
+            acted_on_narrow: false,
+        }
+    }
+
+    /// The arrival of a step that led to `cell`, with goals `(g_w, g_n)`
+    /// holding the objects `before` the step and `after` it: a goal is
+    /// acted on when an object the agent acts on ([`sim::Object::is_acted_on`])
+    /// lay there and the step changed it.
+    pub fn of_step(cell: u32, before: [(u32, u8); 2], after: [u8; 2]) -> Arrival {
+        let acted = |k: usize| {
+            before[k].1 != after[k]
+                && sim::Object::from_code(before[k].1).is_some_and(sim::Object::is_acted_on)
+        };
+        Arrival {
+            cell,
+            acted_on_wide: acted(0),
+            acted_on_narrow: acted(1),
+        }
+    }
+}
+
 /// What one Worker step earned.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WorkerStep {
@@ -126,11 +166,28 @@ impl WorkerGoal {
         penalty: f32,
         task_end: WorkerTaskEnd,
     ) -> WorkerStep {
+        self.book_arrival(Arrival::walked(cell), end, horizon, goal, penalty, task_end)
+    }
+
+    /// [`WorkerGoal::book`] for a step that may also have acted on an
+    /// object goal ([`Arrival`]): a goal on a key is reached when the step
+    /// picks the key up, one on a closed or locked door when it opens it.
+    pub fn book_arrival(
+        &mut self,
+        arrival: Arrival,
+        end: EpisodeEnd,
+        horizon: u32,
+        goal: f32,
+        penalty: f32,
+        task_end: WorkerTaskEnd,
+    ) -> WorkerStep {
+        let cell = arrival.cell;
         self.steps += 1;
         let moved = cell != self.last_cell;
         self.last_cell = cell;
-        let reached = moved && cell == self.narrow;
-        let wide_now = moved && cell == self.wide && !self.wide_paid;
+        let reached = (moved && cell == self.narrow) || arrival.acted_on_narrow;
+        let wide_now =
+            ((moved && cell == self.wide) || arrival.acted_on_wide) && !self.wide_paid;
         if wide_now {
             self.wide_paid = true;
         }
@@ -322,6 +379,39 @@ impl WorkerSide {
 mod tests {
     use super::*;
     use EpisodeEnd::{Running, Terminated, Truncated};
+
+    /// A goal on the key is reached by picking the key up (the object on
+    /// the goal's cell changes), on a locked door by opening it; walking
+    /// next to them, or a step that changes nothing, earns nothing.
+    #[test]
+    fn an_object_goal_is_reached_by_acting_on_it() {
+        use sim::Object::{DoorLocked, DoorOpen, Floor, Key};
+        let (goal, penalty, c, end) = (1.0, -0.01, 20, WorkerTaskEnd::Cut);
+        let (key, door, beside) = (30, 40, 29);
+        // g_w on the door, g_n on the key; the agent stands beside the key.
+        let before = [(door, DoorLocked as u8), (key, Key as u8)];
+        let mut g = WorkerGoal::new(door, key, beside);
+        let idle = Arrival::of_step(beside, before, [DoorLocked as u8, Key as u8]);
+        assert_eq!(idle, Arrival::walked(beside));
+        let s = g.book_arrival(idle, Running, c, goal, penalty, end);
+        assert_eq!(s.reward, penalty, "facing the key is not taking it");
+        let picked = Arrival::of_step(beside, before, [DoorLocked as u8, Floor as u8]);
+        assert!(picked.acted_on_narrow && !picked.acted_on_wide);
+        let s = g.book_arrival(picked, Running, c, goal, penalty, end);
+        assert_eq!(s.reward, penalty + goal, "picking the key up reaches g_n");
+        assert!(s.reached && s.interval_over);
+        // The door as g_w: opened, it is paid once.
+        let mut g = WorkerGoal::new(door, key, beside);
+        let opened = Arrival::of_step(beside, before, [DoorOpen as u8, Key as u8]);
+        let s = g.book_arrival(opened, Running, c, goal, penalty, end);
+        assert_eq!(s.reward, penalty + goal);
+        assert!(g.wide_paid && !s.reached);
+        let s = g.book_arrival(opened, Running, c, goal, penalty, end);
+        assert_eq!(s.reward, penalty, "g_w is paid once per interval");
+        // A cell that held no object the agent acts on is reached by walking.
+        let floor = [(door, Floor as u8), (key, Floor as u8)];
+        assert_eq!(Arrival::of_step(beside, floor, [Key as u8, Floor as u8]), Arrival::walked(beside));
+    }
 
     #[test]
     fn the_worker_is_paid_for_g_w_or_g_n_and_for_nothing_else() {
