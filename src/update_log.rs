@@ -74,10 +74,19 @@ pub struct UpdateRow {
     /// open door in their final grid (Door-Key: the locked door was opened;
     /// `NaN` when none ended).
     pub door_share: f64,
+    /// Share of the training episodes that ended during the update in which
+    /// the key was picked up (Door-Key; 0 on the other tasks).
+    pub key_taken_share: f64,
+    /// Share of the Manager's decisions during the update that named the
+    /// key as `g_w` or `g_n` (Door-Key).
+    pub key_goal_share: f64,
+    /// Share of the Manager's decisions during the update that named a door
+    /// not yet open as `g_w` or `g_n` (Door-Key).
+    pub door_goal_share: f64,
 }
 
 /// The CSV header, the fields of [`UpdateRow`] in order.
-pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share,ball_goal_share,key_share,door_share";
+pub const HEADER: &str = "update,env_steps,wall_seconds,episodes,episodic_return,policy_loss,value_loss,entropy,manager_policy_loss,manager_value_loss,manager_entropy,intervals,goals_reached,traversal_share,sps,exit_share,exit_goal_share,ball_goal_share,key_share,door_share,key_taken_share,key_goal_share,door_goal_share";
 /// Fields of a row written before the exit columns (read on resume).
 const OLD_FIELDS: usize = 15;
 /// Fields of a row written before the ball column (read on resume).
@@ -85,13 +94,16 @@ const EXIT_FIELDS: usize = 17;
 /// Fields of a row written before the key and door columns (read on
 /// resume).
 const BALL_FIELDS: usize = 18;
+/// Fields of a row written before the key-taken and object-goal columns
+/// (read on resume).
+const KEY_FIELDS: usize = 20;
 
 impl UpdateRow {
     fn csv_line(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6}",
+            "{},{},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{:.6},{:.6},{:.1},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
             self.update,
             self.env_steps,
             self.wall_seconds,
@@ -111,7 +123,10 @@ impl UpdateRow {
             self.exit_goal_share,
             self.ball_goal_share,
             self.key_share,
-            self.door_share
+            self.door_share,
+            self.key_taken_share,
+            self.key_goal_share,
+            self.door_goal_share
         );
         s
     }
@@ -124,7 +139,8 @@ impl UpdateRow {
         let old = f.len() == OLD_FIELDS;
         let no_ball = old || f.len() == EXIT_FIELDS;
         let no_key = no_ball || f.len() == BALL_FIELDS;
-        if f.len() != HEADER.split(',').count() && !no_key {
+        let no_objects = no_key || f.len() == KEY_FIELDS;
+        if f.len() != HEADER.split(',').count() && !no_objects {
             return None;
         }
         let x = |i: usize| f[i].parse::<f64>().ok();
@@ -150,6 +166,9 @@ impl UpdateRow {
             ball_goal_share: if no_ball { f64::NAN } else { x(17)? },
             key_share: if no_key { f64::NAN } else { x(18)? },
             door_share: if no_key { f64::NAN } else { x(19)? },
+            key_taken_share: if no_objects { f64::NAN } else { x(20)? },
+            key_goal_share: if no_objects { f64::NAN } else { x(21)? },
+            door_goal_share: if no_objects { f64::NAN } else { x(22)? },
         })
     }
 
@@ -167,6 +186,7 @@ impl UpdateRow {
             v.push(("charts/exit_share", self.exit_share));
             v.push(("charts/key_share", self.key_share));
             v.push(("charts/door_share", self.door_share));
+            v.push(("charts/key_taken_share", self.key_taken_share));
         }
         if hierarchy {
             v.extend([
@@ -177,6 +197,8 @@ impl UpdateRow {
                 ("hrl/traversal_share", self.traversal_share),
                 ("hrl/exit_goal_share", self.exit_goal_share),
                 ("hrl/ball_goal_share", self.ball_goal_share),
+                ("hrl/key_goal_share", self.key_goal_share),
+                ("hrl/door_goal_share", self.door_goal_share),
             ]);
         }
         v
@@ -307,9 +329,18 @@ mod tests {
             ball_goal_share: 0.25,
             key_share: 0.375,
             door_share: 0.0625,
+            key_taken_share: 0.5,
+            key_goal_share: 0.03125,
+            door_goal_share: 0.015625,
             ..row(4)
         };
         assert_eq!(UpdateRow::parse(&r.csv_line()), Some(r));
+        // The 20 fields of the version before the key-taken and object-goal
+        // columns.
+        let key = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5,0.25,0.375,0.0625";
+        let k = UpdateRow::parse(key).expect("a row without the object-goal columns reads");
+        assert_eq!((k.key_share, k.door_share), (0.375, 0.0625));
+        assert!(k.key_taken_share.is_nan() && k.door_goal_share.is_nan());
         // The 18 fields of the version before the key and door columns.
         let ball = "4,7680,1.000,1,0.500000,-0.010000,0.040000,1.050000,0,0,0,7,0.25,0,7680.0,0.125,0.5,0.25";
         let b = UpdateRow::parse(ball).expect("a row without the key column reads");

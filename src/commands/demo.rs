@@ -39,6 +39,7 @@ fn train(a: &DemoArgs, agent: AgentArg, graph: &Path, name: &str) -> anyhow::Res
     super::train::run(TrainArgs {
         task: Task::MultiGoal,
         maze: Maze::Small,
+        layout: None,
         agent: Some(agent),
         candidates: wn.then_some(CandidatesArg::Pivotal),
         init: Some(if wn { InitArg::PiG } else { InitArg::None }),

@@ -71,8 +71,18 @@ pub struct TrainArgs {
     #[arg(long, default_value = "multigoal")]
     pub task: Task,
     /// Embedded maze: small, medium or large (Door-Key uses its Door-Key variant).
-    #[arg(long, default_value = "small")]
+    #[arg(long, default_value = "small", conflicts_with = "layout")]
     pub maze: Maze,
+    /// A layout file instead of an embedded maze, in `sim --layout`'s
+    /// format (# wall, . floor, E exit, K key, D locked door, C closed door,
+    /// O open door, B ball, L lava, > v < ^ the agent). Door-Key's key and
+    /// locked door are the layout's (it must hold both); the MultiGoal
+    /// tasks use the layout's balls, or spawn 5 at random when it has none.
+    /// `--world-graph` should be a `discover --layout` run of the same
+    /// file, whose world graph is found with the doors passable. The run
+    /// keeps a copy of the layout (`layout.txt`) for `evaluate`.
+    #[arg(long)]
+    pub layout: Option<PathBuf>,
     /// Agent [default: the --config file's, else wn].
     #[arg(long, value_enum)]
     pub agent: Option<AgentArg>,
@@ -176,7 +186,7 @@ fn pipeline_env(
     let run_name = format!("train-{}", std::process::id());
     let w = crate::world::WorldArgs {
         maze: a.maze,
-        layout: None,
+        layout: a.layout.clone(),
         task: a.task,
         seed,
         max_steps: None,
@@ -186,11 +196,45 @@ fn pipeline_env(
     Ok((Box::new(env), (p, run_name)))
 }
 
+/// The copy of a `--layout` file in its train run, which `evaluate` reads.
+const LAYOUT_FILE: &str = "layout.txt";
+
+/// The layout and environments of a run: the embedded `maze` (its Door-Key
+/// variant for Door-Key) or the layout `file` (`--layout`), whose objects
+/// are the task's.
+fn train_world(maze: Maze, file: Option<&Path>, task: Task) -> anyhow::Result<(Layout, EnvConfig)> {
+    let Some(path) = file else {
+        let layout = maze.layout(task.uses_door_key_layout());
+        let cfg = EnvConfig::for_task(task, &layout);
+        return Ok((layout, cfg));
+    };
+    let layout = Layout::from_file(path).context("cannot use the layout")?;
+    let has = |o: sim::Object| layout.cells.contains(&(o as u8));
+    if task == Task::DoorKey {
+        anyhow::ensure!(
+            has(sim::Object::Key) && has(sim::Object::DoorLocked),
+            "--layout {}: the doorkey task needs a key (K) and a locked door (D) in the layout",
+            path.display()
+        );
+    }
+    let mut cfg = EnvConfig::for_task(task, &layout);
+    if has(sim::Object::Ball) {
+        cfg.balls = sim::BallSpawn::Layout;
+    }
+    Ok((layout, cfg))
+}
+
 fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
+    let name = match &a.layout {
+        Some(p) => p
+            .file_stem()
+            .map_or_else(|| "layout".to_string(), |s| s.to_string_lossy().into_owned()),
+        None => layout.name.clone(),
+    };
     a.run.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!(
             "train-{}-{}-{}-{}",
-            layout.name,
+            name,
             a.task.name(),
             cfg.name(),
             a.seed
@@ -288,6 +332,9 @@ impl Observer for Progress {
             ball_goal_share: s.ball_goal_share,
             key_share: per_episode(s.key_share),
             door_share: per_episode(s.door_share),
+            key_taken_share: per_episode(s.key_taken_share),
+            key_goal_share: s.key_goal_share,
+            door_goal_share: s.door_goal_share,
         })?;
         self.bar.inc(1);
         self.bar.set_message(format!(
@@ -333,12 +380,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     }
     cfg.agent.validate()?;
     check_budget(&cfg, a.config.as_deref())?;
-    let layout = a.maze.layout(a.task.uses_door_key_layout());
+    let (layout, env_cfg) = train_world(a.maze, a.layout.as_deref(), a.task)?;
     if a.print_config {
         print_config(&a, cfg, &layout)?;
         return Ok(std::process::ExitCode::SUCCESS);
     }
-    let env_cfg = EnvConfig::for_task(a.task, &layout);
     let dir = run_dir(&a, &layout, &cfg.agent);
     // Nothing is written before the directory, the world graph and the
     // run it may hold are known to fit this run.
@@ -400,6 +446,9 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let _lock = lock(&dir, "train")?;
     write_atomic(&dir.join("config.toml"), toml::to_string(&cfg)?.as_bytes())?;
+    if a.layout.is_some() {
+        write_atomic(&dir.join(LAYOUT_FILE), layout.to_text().as_bytes())?;
+    }
     write_atomic(
         &dir.join("seeds.json"),
         &serde_json::to_vec_pretty(&serde_json::json!({
@@ -658,15 +707,20 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             state.env_steps
         );
     }
-    // A Door-Key run records its layout, `<maze>-doorkey`.
-    let maze: Maze = id
-        .maze
-        .strip_suffix("-doorkey")
-        .unwrap_or(&id.maze)
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!(e))?;
-    let layout = maze.layout(id.task.uses_door_key_layout());
-    let env_cfg = EnvConfig::for_task(id.task, &layout);
+    // A `--layout` run keeps its layout; an embedded maze's run records
+    // its name (`<maze>-doorkey` for Door-Key).
+    let own_layout = a.run.join(LAYOUT_FILE);
+    let (layout, env_cfg) = if own_layout.is_file() {
+        train_world(Maze::Small, Some(&own_layout), id.task)?
+    } else {
+        let maze: Maze = id
+            .maze
+            .strip_suffix("-doorkey")
+            .unwrap_or(&id.maze)
+            .parse()
+            .map_err(|e: String| anyhow::anyhow!(e))?;
+        train_world(maze, None, id.task)?
+    };
     let mut agent = build_agent(
         &id.config.agent,
         &layout,

@@ -103,6 +103,13 @@ pub fn config_with_overrides(
         Some(p) => read_config(p)?,
         None => TrainConfig::default(),
     };
+    apply_overrides(base, overrides)
+}
+
+/// `base` with each `KEY=VALUE` of `overrides` set (dotted keys into the
+/// settings' tables, values in TOML syntax or a bare string); an unknown
+/// key or an ill-typed value is refused, naming it.
+pub fn apply_overrides(base: TrainConfig, overrides: &[String]) -> anyhow::Result<TrainConfig> {
     if overrides.is_empty() {
         return Ok(base);
     }

@@ -35,6 +35,11 @@ pub struct Grid {
     /// it keeps committed results reproducible when the defaults move on.
     #[serde(default)]
     pub discover_config: Option<PathBuf>,
+    /// Settings of every training run of the grid, as `train --set`
+    /// takes them (`"agent.object_goals=false"`): a lever's ablation is a
+    /// grid of its own. Each summary records the resolved settings.
+    #[serde(default)]
+    pub set: Vec<String>,
     /// Cells: tasks × configurations (× the grid's mazes and seeds).
     pub group: Vec<Group>,
 }
@@ -171,6 +176,8 @@ impl Grid {
             anyhow::ensure!(n as u64 <= max, "{name} = {n}: at most {max} seeds");
         }
         anyhow::ensure!(!self.maze.is_empty(), "[[maze]]: at least one maze");
+        let cfg = self.try_train_config(self.maze[0].name).context("set")?;
+        cfg.agent.validate().context("set")?;
         if let Some(c) = &self.discover_config {
             anyhow::ensure!(
                 c.is_file(),
@@ -229,13 +236,19 @@ impl Grid {
 
     /// The training configuration of a run on `maze`.
     pub fn train_config(&self, maze: Maze) -> TrainConfig {
-        let b = self.budget(maze).expect("checked maze");
-        TrainConfig {
+        self.try_train_config(maze)
+            .expect("invariant: the grid's settings were checked when it was read")
+    }
+
+    fn try_train_config(&self, maze: Maze) -> anyhow::Result<TrainConfig> {
+        let b = self.budget(maze).context("no budget for that maze")?;
+        let base = TrainConfig {
             env_steps: b.env_steps,
             eval_every: b.eval_every,
             validation_seeds: self.validation_seeds,
             test_seeds: self.test_seeds,
             ..TrainConfig::default()
-        }
+        };
+        learner::run::config::apply_overrides(base, &self.set)
     }
 }

@@ -61,6 +61,7 @@ pub(super) fn reproduce(
             }
             None => None,
         },
+        set: Vec::new(),
         group: Vec::new(),
     };
     let plan = Plan {
