@@ -25,20 +25,22 @@ use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use sim::{AutoReset, BallSpawn, BatchEnv, EnvConfig, EnvMeta, Layout, Maze, SimError, Task};
 
+// The exceptions say they live in `worldgraph` (which re-exports them), so
+// that pickling finds them there: `_worldgraph` is no importable name.
 create_exception!(
-    _worldgraph,
+    worldgraph,
     LayoutError,
     PyValueError,
     "A maze layout was refused; the message names the line and column."
 );
 create_exception!(
-    _worldgraph,
+    worldgraph,
     ClosedError,
     PyRuntimeError,
     "The simulator was closed; create a new one."
 );
 create_exception!(
-    _worldgraph,
+    worldgraph,
     PlanError,
     PyValueError,
     "A world graph could not be loaded, built or queried (unknown node, no route, ...)."

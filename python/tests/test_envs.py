@@ -283,3 +283,15 @@ def test_a_step_releases_the_gil() -> None:
     assert windows, "the steps were too short to tell"
     inside = sum(1 for s in samples for a, b in windows if a < s < b)
     assert inside > 0, f"no sample in the first third of {len(windows)} steps"
+
+
+@pytest.mark.parametrize("name", ["LayoutError", "PlanError", "ClosedError"])
+def test_the_exceptions_pickle_and_live_in_the_worldgraph_module(name: str) -> None:
+    import pickle
+
+    cls = getattr(worldgraph, name)
+    assert cls.__module__ == "worldgraph"
+    again = pickle.loads(pickle.dumps(cls("why")))
+    assert type(again) is cls and str(again) == "why"
+    with pytest.raises(cls):
+        raise again
