@@ -1,6 +1,7 @@
 //! [`WorldGraph`] and its [`Route`]s: a `planner::WorldGraph` and its
 //! dynamic-programming routes (section 3.3).
 
+use super::simulator::cell_px_arg;
 use super::*;
 
 /// A planned route: `actions[i]` is the `i`-th action (MiniGrid numbering)
@@ -41,14 +42,17 @@ pub(crate) struct WorldGraph {
 }
 
 impl WorldGraph {
-    fn node(&self, id: i64) -> PyResult<NodeId> {
+    fn node(&self, id: Int) -> PyResult<NodeId> {
         let n = self.graph.num_nodes();
-        if id < 0 || id as usize >= n {
-            return Err(PlanError::new_err(format!(
-                "unknown node {id}: the graph has nodes 0..{n}"
-            )));
+        match id.0 {
+            Some(v) if (0..n as i128).contains(&v) => Ok(NodeId(v as u16)),
+            Some(v) => Err(PlanError::new_err(format!(
+                "unknown node {v}: the graph has nodes 0..{n}"
+            ))),
+            None => Err(PlanError::new_err(format!(
+                "unknown node: the graph has nodes 0..{n}"
+            ))),
         }
-        Ok(NodeId(id as u16))
     }
 
     fn route_object(&self, r: &planner::Route) -> Route {
@@ -87,16 +91,17 @@ impl WorldGraph {
     /// that need the key fetched and the door opened on the way, which
     /// walks stopping at the first node they meet rarely find.
     #[staticmethod]
-    #[pyo3(signature = (nodes, task="multigoal", maze=None, layout=None, seed=0, exhaustive=false))]
+    #[pyo3(signature = (nodes, task="multigoal", maze=None, layout=None, seed=Int(Some(0)), exhaustive=false))]
     fn build(
         py: Python<'_>,
         nodes: Vec<(u16, u16)>,
         task: &str,
         maze: Option<&str>,
         layout: Option<&str>,
-        seed: u64,
+        seed: Int,
         exhaustive: bool,
     ) -> PyResult<WorldGraph> {
+        let seed = seed.to::<u64>("seed", 0)?;
         let task = parse_task(task)?;
         let layout = layout_of(task, maze, layout)?;
         let mut cells = Vec::with_capacity(nodes.len());
@@ -184,30 +189,30 @@ impl WorldGraph {
         self.graph.config().task.name()
     }
 
-    /// The node at cell `(x, y)`, or None.
-    fn node_at(&self, x: usize, y: usize) -> Option<u16> {
+    /// The node at cell `(x, y)`, or None (also outside the grid).
+    fn node_at(&self, x: Int, y: Int) -> Option<u16> {
         let l = self.graph.layout();
-        if x >= l.width || y >= l.height {
-            return None;
-        }
+        let x = x.0.filter(|v| (0..l.width as i128).contains(v))?;
+        let y = y.0.filter(|v| (0..l.height as i128).contains(v))?;
         self.graph
-            .node_at(CellIdx::from_xy(x, y, l.width))
+            .node_at(CellIdx::from_xy(x as usize, y as usize, l.width))
             .map(|n| n.0)
     }
 
     /// Shortest distance (sum of edge weights) from node `a` to node `b`,
     /// or None when `b` cannot be reached.
-    fn distance(&self, a: i64, b: i64) -> PyResult<Option<u32>> {
+    fn distance(&self, a: Int, b: Int) -> PyResult<Option<u32>> {
         let d = self.graph.distance(self.node(a)?, self.node(b)?);
         Ok((d != planner::UNREACHABLE).then_some(d))
     }
 
-    /// The route from node `start` (standing there facing `facing`) to node
-    /// `target`, in the layout's initial world: the edges of the shortest
-    /// path, each edge's recorded actions in turn, with the turns between
-    /// edges. Raises `PlanError` for an unknown node or no path.
-    #[pyo3(signature = (start, target, facing=0))]
-    fn route(&self, start: i64, target: i64, facing: u8) -> PyResult<Route> {
+    /// The route from node `start` (standing there facing `facing`, 0 to 3)
+    /// to node `target`, in the layout's initial world: the edges of the
+    /// shortest path, each edge's recorded actions in turn, with the turns
+    /// between edges. Raises `PlanError` for an unknown node or no path.
+    #[pyo3(signature = (start, target, facing=Int(Some(0))))]
+    fn route(&self, start: Int, target: Int, facing: Int) -> PyResult<Route> {
+        let facing = facing.within("facing", 0, 3)? as u8;
         let mut r = planner::Route::with_capacity(256, 16);
         self.graph
             .route_into(self.node(start)?, facing, self.node(target)?, &mut r)
@@ -220,16 +225,23 @@ impl WorldGraph {
     /// observation's cell codes, `height × width`) and `carrying` (cell code,
     /// 255 nothing) describe the current world (open doors, key in hand);
     /// without them, the layout's initial world.
-    #[pyo3(signature = (x, y, dir, target, grid=None, carrying=255))]
+    #[pyo3(signature = (x, y, dir, target, grid=None, carrying=Int(Some(255))))]
     fn route_from_pose(
         &self,
-        x: u16,
-        y: u16,
-        dir: u8,
-        target: i64,
+        x: Int,
+        y: Int,
+        dir: Int,
+        target: Int,
         grid: Option<Vec<u8>>,
-        carrying: u8,
+        carrying: Int,
     ) -> PyResult<Route> {
+        let l = self.graph.layout();
+        let pose = sim::Pose {
+            x: x.within("x", 0, l.width as i128 - 1)? as u16,
+            y: y.within("y", 0, l.height as i128 - 1)? as u16,
+            dir: dir.within("dir", 0, 3)? as u8,
+        };
+        let carrying = carrying.to::<u8>("carrying", 0)?;
         let world = match grid {
             Some(g) => {
                 let l = self.graph.layout();
@@ -246,15 +258,16 @@ impl WorldGraph {
         };
         let mut r = planner::Route::with_capacity(256, 16);
         self.graph
-            .route_from_pose_into(sim::Pose { x, y, dir }, self.node(target)?, world, &mut r)
+            .route_from_pose_into(pose, self.node(target)?, world, &mut r)
             .map_err(plan_err)?;
         Ok(self.route_object(&r))
     }
 
-    /// An RGB picture of the maze with the graph drawn on it.
-    #[pyo3(signature = (cell_px=16))]
-    fn render<'py>(&self, py: Python<'py>, cell_px: usize) -> PyResult<Bound<'py, PyArray3<u8>>> {
-        let c = self.graph.render(cell_px);
+    /// An RGB picture of the maze with the graph drawn on it; `cell_px`
+    /// from 2 to 64.
+    #[pyo3(signature = (cell_px=Int(Some(16))))]
+    fn render<'py>(&self, py: Python<'py>, cell_px: Int) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let c = self.graph.render(cell_px_arg(cell_px)?);
         let (w, h) = (c.width, c.height);
         PyArray1::from_vec(py, c.rgb).reshape([h, w, 3])
     }

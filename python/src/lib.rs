@@ -21,7 +21,7 @@ use numpy::{
 };
 use planner::{CellIdx, NodeId, PlannerConfig, PlannerError};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use sim::{AutoReset, BallSpawn, BatchEnv, EnvConfig, EnvMeta, Layout, Maze, SimError, Task};
 
@@ -60,6 +60,62 @@ fn plan_err(e: PlannerError) -> PyErr {
         other => PlanError::new_err(other.to_string()),
     }
 }
+
+/// An integer argument as Python passed it (an `int`, a NumPy integer or
+/// anything with `__index__`), kept whole so that a range check can name
+/// the argument: PyO3's own conversion to a fixed-width type raises an
+/// `OverflowError` that names nothing. `None` inside: beyond ±2**127, out
+/// of every range here.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Int(Option<i128>);
+
+impl<'a, 'py> FromPyObject<'a, 'py> for Int {
+    type Error = PyErr;
+
+    fn extract(obj: pyo3::Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        match obj.extract::<i128>() {
+            Ok(v) => Ok(Int(Some(v))),
+            Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => Ok(Int(None)),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+impl Int {
+    /// The value when it lies in `lo..=hi`, else a `ValueError` naming
+    /// `name` and the limits, in Python's words.
+    pub(crate) fn within(self, name: &str, lo: i128, hi: i128) -> PyResult<i128> {
+        match self.0 {
+            Some(v) if (lo..=hi).contains(&v) => Ok(v),
+            Some(v) => Err(PyValueError::new_err(format!(
+                "{name} must be an int from {lo} to {hi}, got {v}"
+            ))),
+            None => Err(PyValueError::new_err(format!(
+                "{name} must be an int from {lo} to {hi}"
+            ))),
+        }
+    }
+
+    /// [`Int::within`] the range of `T`'s values from `lo` on.
+    pub(crate) fn to<T>(self, name: &str, lo: T) -> PyResult<T>
+    where
+        T: Bounded + TryFrom<i128> + Into<i128>,
+    {
+        let v = self.within(name, lo.into(), T::MAX_I128)?;
+        Ok(T::try_from(v).unwrap_or_else(|_| unreachable!("checked against the range of T")))
+    }
+}
+
+/// The unsigned integer types arguments are read into, with their largest
+/// value as an `i128` (usize's is platform-dependent).
+pub(crate) trait Bounded {
+    /// The largest value.
+    const MAX_I128: i128;
+}
+macro_rules! bounded {
+    ($($t:ty),*) => {$(impl Bounded for $t { const MAX_I128: i128 = <$t>::MAX as i128; })*};
+}
+bounded!(u8, u16, u32, u64);
 
 fn parse_task(task: &str) -> PyResult<Task> {
     task.parse::<Task>().map_err(PyValueError::new_err)

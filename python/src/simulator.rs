@@ -27,6 +27,11 @@ pub(crate) struct Simulator {
     balls: Py<PyArray1<u8>>,
 }
 
+/// The threads a batch may use: the cores this process may run on.
+fn available_cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
 impl Simulator {
     fn batch(&mut self) -> PyResult<&mut BatchEnv> {
         self.batch
@@ -115,10 +120,18 @@ impl Simulator {
                     v.get_type().name()?
                 )));
             }
-            let x: i64 = v.extract().map_err(|_| {
+            let x: Int = v.extract().map_err(|_| {
                 PyTypeError::new_err(format!("action of environment {i} must be an int"))
             })?;
-            self.actions[i] = check(i, x)?;
+            self.actions[i] = match x.0.and_then(|x| i64::try_from(x).ok()) {
+                Some(x) => check(i, x)?,
+                None => {
+                    return Err(PyValueError::new_err(format!(
+                        "action {v} of environment {i} is out of range: the {task} task has actions 0..={}",
+                        num_actions - 1
+                    )));
+                }
+            };
         }
         Ok(())
     }
@@ -174,37 +187,41 @@ impl Simulator {
     /// `num_envs` environments of `task` on an embedded `maze` (small,
     /// medium, large; Door-Key uses the maze's Door-Key variant) or on an
     /// ASCII `layout`. Environment `i` draws from its own stream seeded by
-    /// `(seed, i)`, so results never depend on `threads`. `max_steps`
-    /// defaults to twice the free cells; `balls` (MultiGoal tasks) to 5
-    /// random balls per episode (0: only the layout's `B` cells).
-    /// `autoreset=True` starts the next episode in the step that ends one
-    /// (the final state stays in `final_grid` / `final_agent`).
+    /// `(seed, i)`, so results never depend on `threads`, which is capped
+    /// at the cores this process may use. `max_steps` defaults to twice the
+    /// free cells; `balls` (MultiGoal tasks) to 5 random balls per episode
+    /// (0: only the layout's `B` cells). `autoreset=True` starts the next
+    /// episode in the step that ends one (the final state stays in
+    /// `final_grid` / `final_agent`). An integer out of range raises
+    /// `ValueError` naming it and its limits.
     #[new]
-    #[pyo3(signature = (task, maze=None, layout=None, num_envs=1, seed=0, threads=1, max_steps=None, balls=None, autoreset=true))]
+    #[pyo3(signature = (task, maze=None, layout=None, num_envs=Int(Some(1)), seed=Int(Some(0)), threads=Int(Some(1)), max_steps=None, balls=None, autoreset=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         task: &str,
         maze: Option<&str>,
         layout: Option<&str>,
-        num_envs: usize,
-        seed: u64,
-        threads: usize,
-        max_steps: Option<u32>,
-        balls: Option<u8>,
+        num_envs: Int,
+        seed: Int,
+        threads: Int,
+        max_steps: Option<Int>,
+        balls: Option<Int>,
         autoreset: bool,
     ) -> PyResult<Simulator> {
+        let num_envs = num_envs.to::<u32>("num_envs", 1)? as usize;
+        let seed = seed.to::<u64>("seed", 0)?;
+        let threads = (threads.to::<u32>("threads", 1)? as usize).min(available_cores());
         let task = parse_task(task)?;
         let layout = layout_of(task, maze, layout)?;
         let mut cfg = EnvConfig::for_task(task, &layout);
         if let Some(m) = max_steps {
-            cfg.max_steps = m;
+            cfg.max_steps = m.to::<u32>("max_steps", 1)?;
         }
         if let Some(b) = balls {
-            cfg.balls = if b == 0 {
-                BallSpawn::Layout
-            } else {
-                BallSpawn::Random(b)
+            cfg.balls = match b.to::<u8>("balls", 0)? {
+                0 => BallSpawn::Layout,
+                b => BallSpawn::Random(b),
             };
         }
         cfg.auto_reset = if autoreset {
@@ -212,9 +229,6 @@ impl Simulator {
         } else {
             AutoReset::Off
         };
-        if num_envs == 0 {
-            return Err(PyValueError::new_err("num_envs must be at least 1"));
-        }
         let batch = BatchEnv::new(layout.clone(), cfg, num_envs, seed, threads).map_err(sim_err)?;
         let (n, h, w) = (num_envs, layout.height, layout.width);
         let mut sim = Simulator {
@@ -241,11 +255,12 @@ impl Simulator {
     }
 
     /// Starts a new episode in every environment and writes the first
-    /// observations. With `seed`, the batch is re-seeded first (environment
-    /// `i` from `(seed, i)`); without, every environment continues its
-    /// stream.
+    /// observations. With `seed` (0 to 2**64 - 1), the batch is re-seeded
+    /// first (environment `i` from `(seed, i)`); without, every environment
+    /// continues its stream.
     #[pyo3(signature = (seed=None))]
-    fn reset(&mut self, py: Python<'_>, seed: Option<u64>) -> PyResult<()> {
+    fn reset(&mut self, py: Python<'_>, seed: Option<Int>) -> PyResult<()> {
+        let seed = seed.map(|s| s.to::<u64>("seed", 0)).transpose()?;
         self.batch()?;
         if let Some(s) = seed {
             let n = self.meta.len();
@@ -300,24 +315,18 @@ impl Simulator {
     }
 
     /// An RGB picture (`H·cell_px × W·cell_px × 3`, uint8) of environment
-    /// `index` as its observation stands.
-    #[pyo3(signature = (index=0, cell_px=16))]
+    /// `index` (0 to `num_envs - 1`) as its observation stands; `cell_px`
+    /// from 2 to 64.
+    #[pyo3(signature = (index=Int(Some(0)), cell_px=Int(Some(16))))]
     fn render<'py>(
         &mut self,
         py: Python<'py>,
-        index: usize,
-        cell_px: usize,
+        index: Int,
+        cell_px: Int,
     ) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let index = index.within("index", 0, self.meta.len() as i128 - 1)? as usize;
+        let cell_px = cell_px_arg(cell_px)?;
         self.batch()?;
-        let n = self.meta.len();
-        if index >= n {
-            return Err(PyValueError::new_err(format!(
-                "index {index} out of range 0..{n}"
-            )));
-        }
-        if !(2..=64).contains(&cell_px) {
-            return Err(PyValueError::new_err("cell_px must be in 2..=64"));
-        }
         let (w, h) = (self.layout.width, self.layout.height);
         let grid = self.grid.bind(py).readonly();
         let cells = &grid.as_slice()?[index * w * h..(index + 1) * w * h];
@@ -368,7 +377,7 @@ impl Simulator {
     fn max_steps(&self) -> u32 {
         self.cfg.max_steps
     }
-    /// Threads stepping the batch.
+    /// Threads stepping the batch (the number asked for, capped at the cores).
     #[getter]
     fn threads(&self) -> usize {
         self.threads
@@ -459,4 +468,9 @@ impl Simulator {
             if self.batch.is_none() { ", closed" } else { "" }
         )
     }
+}
+
+/// The `cell_px` argument of the pictures: 2 to 64 pixels a cell.
+pub(crate) fn cell_px_arg(cell_px: Int) -> PyResult<usize> {
+    Ok(cell_px.within("cell_px", 2, 64)? as usize)
 }

@@ -130,3 +130,24 @@ def test_a_real_discover_run_loads_and_routes(worldgraph_binary: pathlib.Path, t
     assert (at_b.x, at_b.y) == graph.nodes[b]
     door_key = worldgraph.load_discover_run(run, task="doorkey")
     assert door_key.task == "doorkey" and door_key.layout_name == "small-doorkey"
+
+
+@pytest.mark.parametrize("facing", [4, 5, -1])
+def test_a_facing_out_of_range_is_a_value_error(discover_run: pathlib.Path, facing: int) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    with pytest.raises(ValueError, match=rf"facing must be an int from 0 to 3, got {facing}"):
+        graph.route(0, 1, facing=facing)
+    x, y = graph.nodes[1]
+    with pytest.raises(ValueError, match=rf"dir must be an int from 0 to 3, got {facing}"):
+        graph.route_from_pose(x, y, facing, 0)
+
+
+def test_node_and_cell_arguments_out_of_range_are_named(discover_run: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    assert graph.node_at(-1, 0) is None and graph.node_at(2**70, 0) is None
+    with pytest.raises(worldgraph.PlanError, match=r"unknown node 1180591620717411303424"):
+        graph.route(2**70, 0)
+    with pytest.raises(ValueError, match=r"x must be an int from 0 to 12, got -1"):
+        graph.route_from_pose(-1, 11, 0, 0)
+    with pytest.raises(ValueError, match=r"carrying must be an int from 0 to 255, got -1"):
+        graph.route_from_pose(1, 11, 0, 0, carrying=-1)

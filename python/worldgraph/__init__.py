@@ -23,12 +23,13 @@ from __future__ import annotations
 import gymnasium as gym
 
 from ._worldgraph import ClosedError, LayoutError, PlanError, Simulator, check_layout, maze_text
-from .envs import ACTIONS, CARRYING_NOTHING, NUM_OBJECTS, OBJECTS, WorldGraphEnv, WorldGraphVectorEnv, observation_space
+from .envs import ACTIONS, CARRYING_NOTHING, CELL_PX, NUM_OBJECTS, OBJECTS, WorldGraphEnv, WorldGraphVectorEnv, observation_space
 from .graph import Replay, Route, WorldGraph, load_discover_run, pivotal_states, replay_route
 
 __all__ = [
     "ACTIONS",
     "CARRYING_NOTHING",
+    "CELL_PX",
     "CUSTOM_ID",
     "ClosedError",
     "ENV_IDS",

@@ -1,7 +1,9 @@
 """Type stubs of the native module ``worldgraph._worldgraph`` (PyO3).
 
 The Gymnasium classes in :mod:`worldgraph.envs` wrap :class:`Simulator`;
-:mod:`worldgraph.graph` wraps :class:`WorldGraph`.
+:mod:`worldgraph.graph` wraps :class:`WorldGraph`. Integer arguments out of
+range raise ``ValueError`` naming the argument and its limits; NumPy
+integers are accepted wherever an ``int`` is.
 """
 
 import os
@@ -49,15 +51,19 @@ class Simulator:
     ) -> None:
         """``num_envs`` environments of ``task`` (``multigoal``,
         ``multigoal-sparse``, ``multigoal-stochastic``, ``doorkey``) on an
-        embedded ``maze`` or an ASCII ``layout``; already reset."""
+        embedded ``maze`` or an ASCII ``layout``; already reset. ``threads``
+        (at least 1) is capped at the cores; ``seed`` 0 to 2**64 - 1,
+        ``max_steps`` 1 to 2**32 - 1, ``balls`` 0 to 255."""
     def reset(self, seed: int | None = None) -> None:
-        """Starts a new episode everywhere; ``seed`` re-seeds the batch first."""
+        """Starts a new episode everywhere; ``seed`` (0 to 2**64 - 1)
+        re-seeds the batch first."""
     def step(self, actions: npt.ArrayLike) -> int:
         """Steps environment ``i`` with ``actions[i]`` (GIL released); returns
         how many episodes ended. Raises ``ValueError`` for a wrong shape or an
         out-of-range action, ``TypeError`` for a non-integer array."""
     def render(self, index: int = 0, cell_px: int = 16) -> npt.NDArray[np.uint8]:
-        """An RGB frame ``(height·cell_px, width·cell_px, 3)`` of environment ``index``."""
+        """An RGB frame ``(height·cell_px, width·cell_px, 3)`` of environment
+        ``index``; ``cell_px`` 2 to 64."""
     def close(self) -> None:
         """Releases the environments; later calls raise :class:`ClosedError`."""
     @property
@@ -76,7 +82,8 @@ class Simulator:
     @property
     def max_steps(self) -> int: ...
     @property
-    def threads(self) -> int: ...
+    def threads(self) -> int:
+        """Threads stepping the batch: the number asked for, capped at the cores."""
     @property
     def seed(self) -> int: ...
     @property
@@ -159,11 +166,13 @@ class WorldGraph:
     def layout_name(self) -> str: ...
     @property
     def task(self) -> str: ...
-    def node_at(self, x: int, y: int) -> int | None: ...
+    def node_at(self, x: int, y: int) -> int | None:
+        """The node on cell ``(x, y)``, or None (also outside the grid)."""
     def distance(self, a: int, b: int) -> int | None:
         """Shortest distance from node ``a`` to node ``b``, or None."""
     def route(self, start: int, target: int, facing: int = 0) -> Route:
-        """Node-to-node route in the layout's initial world."""
+        """Node-to-node route in the layout's initial world, standing on
+        ``start`` facing ``facing`` (0 to 3)."""
     def route_from_pose(
         self,
         x: int,
@@ -175,4 +184,5 @@ class WorldGraph:
     ) -> Route:
         """Route from any pose to node ``target``, in the observed world
         (``grid``, ``carrying``) or the initial one."""
-    def render(self, cell_px: int = 16) -> npt.NDArray[np.uint8]: ...
+    def render(self, cell_px: int = 16) -> npt.NDArray[np.uint8]:
+        """The maze with the graph drawn on it; ``cell_px`` 2 to 64."""

@@ -19,6 +19,9 @@ door, 7 exit, 8 lava), and ``"agent"``, uint8 ``[x, y, dir, carrying]``
 nothing). Actions use MiniGrid's numbering: 0 left, 1 right, 2 forward (the
 MultiGoal tasks use these three), 3 pickup, 4 drop, 5 toggle (Door-Key uses
 all six).
+
+Integer arguments out of range raise ``ValueError`` naming the argument and
+its limits; seeds may be NumPy integers (0 to 2**64 - 1).
 """
 
 from __future__ import annotations
@@ -56,6 +59,9 @@ OBJECTS = {
 ACTIONS = {"left": 0, "right": 1, "forward": 2, "pickup": 3, "drop": 4, "toggle": 5}
 
 _RENDER_MODES = ["rgb_array"]
+#: Pixels per cell of rendered frames: the native renderer's limits.
+CELL_PX = (2, 64)
+_MAX_SEED = 2**64 - 1
 
 
 def observation_space(width: int, height: int) -> spaces.Dict:
@@ -77,9 +83,29 @@ def _new_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**63 - 1))
 
 
-def _check_render_mode(render_mode: str | None) -> None:
+def _check_render_args(render_mode: str | None, cell_px: int) -> None:
     if render_mode is not None and render_mode not in _RENDER_MODES:
         raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+    lo, hi = CELL_PX
+    if isinstance(cell_px, bool) or not isinstance(cell_px, (int, np.integer)):
+        raise TypeError(f"cell_px must be an int, got {type(cell_px).__name__}")
+    if not lo <= cell_px <= hi:
+        raise ValueError(f"cell_px must be an int from {lo} to {hi}, got {cell_px}")
+
+
+def _seed_arg(seed: Any) -> int | None:
+    """``reset``'s seed as a Python int (NumPy integers included, as
+    Gymnasium's checks allow them and its seeding does not), or None."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(
+            f"seed must be one int (environment i is seeded from (seed, i)), got {type(seed).__name__}"
+        )
+    seed = int(seed)
+    if not 0 <= seed <= _MAX_SEED:
+        raise ValueError(f"seed must be an int from 0 to {_MAX_SEED}, got {seed}")
+    return seed
 
 
 class _OnSimulator:
@@ -113,7 +139,7 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         balls: balls spawned per episode in the MultiGoal tasks (default 5;
             0: only the layout's ``B`` cells).
         render_mode: ``None`` or ``"rgb_array"``.
-        cell_px: pixels per cell of rendered frames.
+        cell_px: pixels per cell of rendered frames (2 to 64).
 
     ``step`` returns ``info = {"balls": n}`` (balls collected so far), plus
     ``"episode": {"r": return, "l": length}`` on the step that ends the
@@ -132,7 +158,7 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         render_mode: str | None = None,
         cell_px: int = 16,
     ) -> None:
-        _check_render_mode(render_mode)
+        _check_render_args(render_mode, cell_px)
         self._sim = _native.Simulator(
             task,
             maze=None if layout is not None else maze,
@@ -157,15 +183,16 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Starts a new episode. ``seed`` re-seeds the environment's own
-        stream (the same seed gives the same episodes); ``options`` takes no
-        keys."""
+        """Starts a new episode. ``seed`` (an int or NumPy integer, 0 to
+        2**64 - 1) re-seeds the environment's own stream (the same seed gives
+        the same episodes); ``options`` takes no keys."""
         self._check_open()
-        super().reset(seed=seed)
+        seed = _seed_arg(seed)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}: none are supported")
+        super().reset(seed=seed)
         if seed is not None:
-            self._sim.reset(seed=int(seed))
+            self._sim.reset(seed=seed)
         elif not self._seeded:
             self._sim.reset(seed=_new_seed(self.np_random))
         else:
@@ -208,12 +235,13 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
         num_envs: number of environments.
         task, maze, layout, max_steps, balls, render_mode, cell_px: as
             :class:`WorldGraphEnv`.
-        threads: threads stepping the batch (default: one per 256
-            environments, at most the cores; below a few hundred
-            environments waking a second thread costs more than the step,
-            and on a loaded machine one thread can beat two at any size).
-            Results never depend on it: environment ``i`` draws from its
-            own stream seeded by ``(seed, i)``.
+        threads: threads stepping the batch, at least 1; more than the
+            cores this process may use are capped at the cores (default:
+            one per 256 environments, at most the cores; below a few
+            hundred environments waking a second thread costs more than
+            the step, and on a loaded machine one thread can beat two at
+            any size). Results never depend on it: environment ``i`` draws
+            from its own stream seeded by ``(seed, i)``.
         copy: return copies of the observation and reward arrays instead of
             the simulator's buffers (default False: zero copy; the arrays
             returned are rewritten by the next ``step``/``reset``).
@@ -243,7 +271,7 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
         cell_px: int = 16,
         copy: bool = False,
     ) -> None:
-        _check_render_mode(render_mode)
+        _check_render_args(render_mode, cell_px)
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
         if threads is None:
@@ -281,18 +309,16 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Starts a new episode in every environment; ``seed`` (one int)
-        seeds environment ``i`` from ``(seed, i)``. ``options`` takes no keys."""
+        """Starts a new episode in every environment; ``seed`` (one int or
+        NumPy integer, 0 to 2**64 - 1) seeds environment ``i`` from
+        ``(seed, i)``. ``options`` takes no keys."""
         self._check_open()
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
-            raise TypeError(
-                f"seed must be one int (environment i is seeded from (seed, i)), got {type(seed).__name__}"
-            )
+        seed = _seed_arg(seed)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}: none are supported")
         super().reset(seed=seed)
         if seed is not None:
-            self._sim.reset(seed=int(seed))
+            self._sim.reset(seed=seed)
         else:
             self._sim.reset()
         return self._observation(), {}
