@@ -32,6 +32,38 @@ fn available_cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
+/// Refuses a batch whose memory would exceed what the machine has
+/// available (Linux's `MemAvailable`; elsewhere nothing is checked), with a
+/// `MemoryError`: an allocation that fails in Rust aborts the interpreter.
+fn check_memory(num_envs: usize, cells: usize) -> PyResult<()> {
+    // Per environment: the simulator's state and grid, its step record and
+    // action, and the NumPy buffers (grid and final grid, the small arrays).
+    let per_env = std::mem::size_of::<sim::Env>()
+        + cells
+        + std::mem::size_of::<EnvMeta>()
+        + 1
+        + 2 * cells
+        + 8
+        + 4
+        + 2
+        + 8
+        + 1;
+    let needed = (num_envs as u128) * (per_env as u128);
+    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        let line = m.lines().find(|l| l.starts_with("MemAvailable:"))?;
+        let kib: u128 = line.split_whitespace().nth(1)?.parse().ok()?;
+        Some(kib * 1024)
+    });
+    match available {
+        Some(avail) if needed > avail => Err(pyo3::exceptions::PyMemoryError::new_err(format!(
+            "num_envs={num_envs} needs about {:.1} GB for a {cells}-cell maze; {:.1} GB are available",
+            needed as f64 / 1e9,
+            avail as f64 / 1e9
+        ))),
+        _ => Ok(()),
+    }
+}
+
 impl Simulator {
     fn batch(&mut self) -> PyResult<&mut BatchEnv> {
         self.batch
@@ -229,6 +261,7 @@ impl Simulator {
         } else {
             AutoReset::Off
         };
+        check_memory(num_envs, layout.cells.len())?;
         let batch = BatchEnv::new(layout.clone(), cfg, num_envs, seed, threads).map_err(sim_err)?;
         let (n, h, w) = (num_envs, layout.height, layout.width);
         let mut sim = Simulator {

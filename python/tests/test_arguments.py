@@ -127,3 +127,10 @@ def test_unsupported_render_modes_are_refused_by_the_env() -> None:
     with pytest.raises(ValueError, match="render_mode"):
         worldgraph.WorldGraphVectorEnv(2, render_mode="human")
 
+
+@pytest.mark.skipif(not os.path.exists("/proc/meminfo"), reason="the memory check reads Linux's /proc/meminfo")
+def test_a_batch_larger_than_the_memory_is_a_memory_error_not_an_abort() -> None:
+    with pytest.raises(MemoryError, match=r"num_envs=1000000000 needs about \d+\.\d GB"):
+        worldgraph.Simulator("multigoal", maze="small", num_envs=10**9)
+    with pytest.raises(MemoryError):
+        gym.make_vec(SMALL, num_envs=10**9)
