@@ -23,7 +23,10 @@ use planner::{CellIdx, NodeId, PlannerConfig, PlannerError};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use sim::{AutoReset, BallSpawn, BatchEnv, EnvConfig, EnvMeta, Layout, Maze, SimError, Task};
+use sim::{
+    AutoReset, BallSpawn, BatchEnv, EnvConfig, EnvMeta, Layout, LayoutError as SimLayoutError,
+    LayoutErrorKind, Maze, SimError, Task,
+};
 
 // The exceptions say they live in `worldgraph` (which re-exports them), so
 // that pickling finds them there: `_worldgraph` is no importable name.
@@ -132,13 +135,65 @@ fn parse_maze(maze: &str) -> PyResult<Maze> {
         })
 }
 
+/// Parses layout text as Python code usually holds it: a triple-quoted
+/// string, whose first line is empty and whose rows may share an
+/// indentation. Leading blank lines and the rows' common leading
+/// whitespace are set aside before `sim` parses the rest; errors then name
+/// the line and column of the text as given (1-based).
+fn parse_layout(text: &str) -> Result<Layout, SimLayoutError> {
+    let lines: Vec<&str> = text.split('\n').collect();
+    let skipped = lines.iter().take_while(|l| l.trim().is_empty()).count();
+    let rows = &lines[skipped..];
+    let indent = rows
+        .iter()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.len() - l.trim_start_matches([' ', '\t']).len())
+        .min()
+        .unwrap_or(0);
+    // Only a prefix every non-blank row shares is removed (as textwrap.dedent).
+    let prefix = rows
+        .iter()
+        .find(|l| !l.trim().is_empty())
+        .map_or("", |l| &l[..indent]);
+    let shared = rows
+        .iter()
+        .all(|l| l.trim().is_empty() || l.starts_with(prefix));
+    let cut = if shared { indent } else { 0 };
+    if skipped == 0 && cut == 0 {
+        return Layout::parse("layout", text);
+    }
+    // Non-blank rows start with the prefix (ASCII whitespace), so `cut` is
+    // a character boundary there; blank rows become empty.
+    let body: Vec<&str> = rows
+        .iter()
+        .map(|l| if l.trim().is_empty() { "" } else { &l[cut..] })
+        .collect();
+    Layout::parse("layout", &body.join("\n")).map_err(|mut e| {
+        let shift = |line: &mut usize, col: &mut usize| {
+            if *line > 0 {
+                *line += skipped;
+                if *col > 0 {
+                    *col += cut;
+                }
+            }
+        };
+        shift(&mut e.line, &mut e.col);
+        if let LayoutErrorKind::TwoAgents {
+            first_line,
+            first_col,
+        } = &mut e.kind
+        {
+            shift(first_line, first_col);
+        }
+        e
+    })
+}
+
 /// The layout of a task: an embedded maze (its Door-Key variant for the
 /// Door-Key task) or ASCII text.
 fn layout_of(task: Task, maze: Option<&str>, layout: Option<&str>) -> PyResult<Layout> {
     match (maze, layout) {
-        (_, Some(text)) => {
-            Layout::parse("layout", text).map_err(|e| LayoutError::new_err(e.to_string()))
-        }
+        (_, Some(text)) => parse_layout(text).map_err(|e| LayoutError::new_err(e.to_string())),
         (Some(m), None) => Ok(parse_maze(m)?.layout(task.uses_door_key_layout())),
         (None, None) => Err(PyValueError::new_err("give a maze name or a layout")),
     }
@@ -155,7 +210,7 @@ fn maze_text(maze: &str, door_key: bool) -> PyResult<&'static str> {
 /// raises `LayoutError` naming the line and column.
 #[pyfunction]
 fn check_layout(text: &str) -> PyResult<(usize, usize)> {
-    let l = Layout::parse("layout", text).map_err(|e| LayoutError::new_err(e.to_string()))?;
+    let l = parse_layout(text).map_err(|e| LayoutError::new_err(e.to_string()))?;
     Ok((l.width, l.height))
 }
 

@@ -1,7 +1,7 @@
 """Arguments as a careful user passes them: integers out of range name the
 argument and its limits (a ValueError, never the binding's OverflowError),
 NumPy integers are ints, thread counts are checked in Python's words and
-capped at the cores."""
+capped at the cores, layouts come as triple-quoted strings."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import os
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 
 import worldgraph
 
@@ -119,6 +120,61 @@ def test_an_action_too_large_for_any_integer_type_is_out_of_range() -> None:
     envs.reset(seed=0)
     with pytest.raises(ValueError, match=r"of environment 1 is out of range"):
         envs.step([0, 2**70])
+
+
+LEADING_NEWLINE = """
+#####
+#>.E#
+#####
+"""
+
+
+def indented() -> str:
+    layout = """
+        #######
+        #>..B.#
+        #....E#
+        #######
+    """
+    return layout
+
+
+@pytest.mark.parametrize("text", [LEADING_NEWLINE, indented(), "\n\n  ####\n  #>E#\n  ####\n  \n"])
+def test_triple_quoted_layouts_are_accepted(text: str) -> None:
+    env = gym.make("worldgraph/Custom-v0", layout=text)
+    check_env(env.unwrapped)
+    obs, _ = env.reset(seed=0)
+    assert obs["agent"][:2].tolist() == [1, 1]
+    sim = env.unwrapped.simulator
+    assert worldgraph.check_layout(text) == (sim.width, sim.height)
+    graph = worldgraph.WorldGraph.build([(1, 1)], layout=text)
+    assert graph.num_nodes == 1
+
+
+def test_errors_in_a_triple_quoted_layout_name_the_line_and_column_as_written() -> None:
+    # Line 1 is the empty line after the opening quotes; the bad cell is on
+    # line 3 of the string, column 11 counting the indentation.
+    text = """
+        #####
+        #>x.#
+        #..E#
+        #####
+    """
+    with pytest.raises(worldgraph.LayoutError, match=r"line 3, column 11"):
+        gym.make("worldgraph/Custom-v0", layout=text)
+    with pytest.raises(worldgraph.LayoutError, match=r"ragged row: line 4"):
+        worldgraph.check_layout("\n#####\n#>.E#\n####\n#####\n")
+    with pytest.raises(worldgraph.LayoutError, match=r"a second agent at line 4, column 3; the first is at line 3, column 2"):
+        worldgraph.check_layout("\n#####\n#>.E#\n#.>.#\n#####\n")
+    with pytest.raises(worldgraph.LayoutError, match=r"the layout is empty"):
+        worldgraph.check_layout("\n   \n\n")
+
+
+def test_the_64_cell_limit_is_a_layout_error() -> None:
+    wall = "#" * 65
+    text = f"{wall}\n#>{'.' * 61}E#\n{wall}\n"
+    with pytest.raises(worldgraph.LayoutError, match=r"at most 64x64 cells"):
+        gym.make("worldgraph/Custom-v0", layout=text)
 
 
 def test_unsupported_render_modes_are_refused_by_the_env() -> None:

@@ -26,7 +26,10 @@ def maze_text(maze: str, door_key: bool = False) -> str:
 
 def check_layout(text: str) -> tuple[int, int]:
     """Parses and validates an ASCII layout; returns ``(width, height)`` or
-    raises :class:`LayoutError` naming the line and column."""
+    raises :class:`LayoutError` naming the line and column. Leading blank
+    lines and a common indentation (a triple-quoted string) are set aside;
+    errors count lines and columns of the text as given. At most 64×64
+    cells."""
 
 class Simulator:
     """A batch of maze environments stepped in parallel into NumPy arrays.
