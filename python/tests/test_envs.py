@@ -295,3 +295,67 @@ def test_the_exceptions_pickle_and_live_in_the_worldgraph_module(name: str) -> N
     assert type(again) is cls and str(again) == "why"
     with pytest.raises(cls):
         raise again
+
+
+def test_envs_refuse_pickling_and_copying_with_a_clear_error() -> None:
+    import copy
+    import pickle
+
+    env = gym.make("worldgraph/MultiGoal-Small-v0")
+    envs = gym.make_vec("worldgraph/MultiGoal-Small-v0", num_envs=2)
+    sim = worldgraph.Simulator("multigoal", maze="small")
+    for obj, name in ((env, "WorldGraphEnv"), (envs, "WorldGraphVectorEnv"), (sim, "Simulator")):
+        for attempt in (pickle.dumps, copy.deepcopy):
+            with pytest.raises(TypeError, match=rf"{name} cannot be pickled or copied"):
+                attempt(obj)
+        # (copy.copy of a Gymnasium wrapper copies the wrapper alone, sharing the env.)
+        with pytest.raises(TypeError, match=rf"{name} cannot be pickled or copied"):
+            copy.copy(getattr(obj, "unwrapped", obj))
+
+
+def test_close_from_another_thread_waits_for_the_step_in_progress() -> None:
+    import threading
+    import time
+
+    n = 200_000
+    envs = worldgraph.WorldGraphVectorEnv(n, task="multigoal", maze="medium", threads=1)
+    envs.reset(seed=0)
+    actions = np.full(n, 2, dtype=np.uint8)
+    outcomes: list[object] = []
+    started = threading.Event()
+
+    def stepper() -> None:
+        try:
+            for _ in range(1000):
+                started.set()
+                envs.step(actions)
+            outcomes.append("finished")
+        except Exception as e:  # noqa: BLE001 - the test inspects it
+            outcomes.append(e)
+
+    thread = threading.Thread(target=stepper)
+    thread.start()
+    started.wait()
+    time.sleep(0.01)
+    envs.close()  # waits for the step in progress, then closes
+    thread.join()
+    assert envs.closed and len(outcomes) == 1
+    assert isinstance(outcomes[0], ClosedEnvironmentError), outcomes[0]
+    # Two threads stepping one simulator take turns instead of failing.
+    sim = worldgraph.Simulator("multigoal", maze="medium", num_envs=n, threads=1)
+    errors: list[Exception] = []
+
+    def step_some() -> None:
+        try:
+            for _ in range(5):
+                sim.step(actions)
+                _ = sim.closed, sim.seed, sim.agent
+        except Exception as e:  # noqa: BLE001
+            errors.append(e)
+
+    threads = [threading.Thread(target=step_some) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []

@@ -37,7 +37,9 @@ class Simulator:
     Every array attribute is allocated once and rewritten in place by
     :meth:`reset` and :meth:`step` (its buffer never moves): copy what you
     keep. Environment ``i`` draws from its own stream seeded by
-    ``(seed, i)``, so results never depend on ``threads``.
+    ``(seed, i)``, so results never depend on ``threads``. Thread-safe:
+    calls from several threads take turns (``close`` waits for a step in
+    progress). Cannot be pickled or copied.
     """
 
     def __init__(
@@ -68,7 +70,8 @@ class Simulator:
         """An RGB frame ``(height·cell_px, width·cell_px, 3)`` of environment
         ``index``; ``cell_px`` 2 to 64."""
     def close(self) -> None:
-        """Releases the environments; later calls raise :class:`ClosedError`."""
+        """Releases the environments (after a step in progress in another
+        thread); later calls raise :class:`ClosedError`."""
     @property
     def closed(self) -> bool: ...
     @property

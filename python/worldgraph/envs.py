@@ -21,7 +21,9 @@ MultiGoal tasks use these three), 3 pickup, 4 drop, 5 toggle (Door-Key uses
 all six).
 
 Integer arguments out of range raise ``ValueError`` naming the argument and
-its limits; seeds may be NumPy integers (0 to 2**64 - 1).
+its limits; seeds may be NumPy integers (0 to 2**64 - 1). The environments
+cannot be pickled or copied (their state lives in the Rust simulator): make
+another with the same arguments and seed.
 """
 
 from __future__ import annotations
@@ -121,6 +123,15 @@ class _OnSimulator:
     def _check_open(self) -> None:
         if self._sim.closed:
             raise ClosedEnvironmentError("the environment is closed; make a new one")
+
+    def __reduce_ex__(self, protocol: Any) -> Any:
+        """Pickling and copying are refused (also ``copy.copy`` and
+        ``copy.deepcopy``): the environments' state lives in the Rust
+        simulator."""
+        raise TypeError(
+            f"{type(self).__name__} cannot be pickled or copied: its state lives in the Rust simulator; "
+            "make another with the same arguments (gym.make / gym.make_vec) and reset it with the same seed"
+        )
 
 
 class WorldGraphEnv(_OnSimulator, gym.Env):
