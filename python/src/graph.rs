@@ -1,28 +1,109 @@
 //! [`WorldGraph`] and its [`Route`]s: a `planner::WorldGraph` and its
 //! dynamic-programming routes (section 3.3).
 
+use pyo3::types::{PyIterator, PyList, PyType};
+
 use super::simulator::cell_px_arg;
 use super::*;
 
 /// A planned route: `actions[i]` is the `i`-th action (MiniGrid numbering)
 /// and `cells[i]` the agent's `(x, y)` after it; `nodes` are the graph
-/// nodes passed, first to target.
-#[pyclass(module = "worldgraph._worldgraph", frozen, get_all)]
+/// nodes passed, first to target. A value: routes compare equal when all
+/// four parts do, hash, pickle, and iterate over their actions.
+#[pyclass(module = "worldgraph._worldgraph", frozen, eq, hash)]
+#[derive(PartialEq, Eq, Hash)]
 pub(crate) struct Route {
     /// `(x, y, dir)` the route starts from.
+    #[pyo3(get)]
     start: (u16, u16, u8),
     /// Actions, MiniGrid numbering.
     actions: Vec<u8>,
     /// The agent's `(x, y)` after each action.
+    #[pyo3(get)]
     cells: Vec<(u16, u16)>,
     /// Node ids passed, first to target.
+    #[pyo3(get)]
     nodes: Vec<u16>,
 }
 
+/// The arguments of `Route(start, actions, cells, nodes)`, as pickling
+/// passes them.
+type RouteParts = ((u16, u16, u8), Vec<u32>, Vec<(u16, u16)>, Vec<u16>);
+
+/// The largest action code (MiniGrid's `toggle`).
+const MAX_ACTION: i128 = 5;
+
 #[pymethods]
 impl Route {
+    /// A route from its parts, as a query returns them (pickling uses
+    /// this): `start` `(x, y, dir)`, the `actions`, the `cells` after each
+    /// action and the `nodes` passed. Values out of range raise `ValueError`.
+    #[new]
+    fn new(
+        start: (Int, Int, Int),
+        actions: Vec<Int>,
+        cells: Vec<(Int, Int)>,
+        nodes: Vec<Int>,
+    ) -> PyResult<Route> {
+        if actions.len() != cells.len() {
+            return Err(PyValueError::new_err(format!(
+                "actions and cells must have the same length, got {} and {}",
+                actions.len(),
+                cells.len()
+            )));
+        }
+        let coord = |v: Int, name: String| v.to::<u16>(&name, 0);
+        let start = (
+            coord(start.0, "start[0]".into())?,
+            coord(start.1, "start[1]".into())?,
+            start.2.within("start[2]", 0, 3)? as u8,
+        );
+        let actions = actions
+            .into_iter()
+            .enumerate()
+            .map(|(i, a)| Ok(a.within(&format!("actions[{i}]"), 0, MAX_ACTION)? as u8))
+            .collect::<PyResult<_>>()?;
+        let cells = cells
+            .into_iter()
+            .enumerate()
+            .map(|(i, (x, y))| {
+                Ok((
+                    coord(x, format!("cells[{i}][0]"))?,
+                    coord(y, format!("cells[{i}][1]"))?,
+                ))
+            })
+            .collect::<PyResult<_>>()?;
+        let nodes = nodes
+            .into_iter()
+            .enumerate()
+            .map(|(i, n)| coord(n, format!("nodes[{i}]")))
+            .collect::<PyResult<_>>()?;
+        Ok(Route {
+            start,
+            actions,
+            cells,
+            nodes,
+        })
+    }
+
+    /// Actions, MiniGrid numbering (a new list of ints on every access).
+    #[getter]
+    fn actions(&self) -> Vec<u32> {
+        self.actions.iter().map(|&a| u32::from(a)).collect()
+    }
     fn __len__(&self) -> usize {
         self.actions.len()
+    }
+    /// Iterates over the actions.
+    fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyIterator>> {
+        PyList::new(py, self.actions())?.try_iter()
+    }
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> (Bound<'py, PyType>, RouteParts) {
+        let r = slf.get();
+        (
+            slf.get_type(),
+            (r.start, r.actions(), r.cells.clone(), r.nodes.clone()),
+        )
     }
     fn __repr__(&self) -> String {
         format!(
@@ -78,6 +159,21 @@ impl WorldGraph {
             .detach(|| planner::WorldGraph::load(&path))
             .map_err(plan_err)?;
         Ok(WorldGraph { graph })
+    }
+
+    /// A graph from the JSON text of [`WorldGraph::to_json`] (a saved
+    /// file's content), checked as `load` checks a file.
+    #[staticmethod]
+    fn from_json(py: Python<'_>, text: &str) -> PyResult<WorldGraph> {
+        let graph = py
+            .detach(|| planner::WorldGraph::from_json("json", text))
+            .map_err(plan_err)?;
+        Ok(WorldGraph { graph })
+    }
+
+    /// The graph as the JSON text `save` writes.
+    fn to_json(&self) -> String {
+        self.graph.to_json()
     }
 
     /// Builds the graph over the given node cells `[(x, y), ...]` of a maze
@@ -141,6 +237,22 @@ impl WorldGraph {
     /// Saves the graph as JSON (the planner's format), atomically.
     fn save(&self, path: PathBuf) -> PyResult<()> {
         self.graph.save(&path).map_err(plan_err)
+    }
+
+    /// Pickles as its JSON text.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+        Ok((
+            slf.get_type().getattr("from_json")?,
+            (slf.get().graph.to_json(),),
+        ))
+    }
+    /// The graph is immutable: a copy is itself.
+    fn __copy__(slf: Bound<'_, Self>) -> Bound<'_, Self> {
+        slf
+    }
+    /// The graph is immutable: a deep copy is itself.
+    fn __deepcopy__<'py>(slf: Bound<'py, Self>, _memo: &Bound<'py, PyAny>) -> Bound<'py, Self> {
+        slf
     }
 
     /// Number of nodes.

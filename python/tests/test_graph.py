@@ -132,6 +132,40 @@ def test_a_real_discover_run_loads_and_routes(worldgraph_binary: pathlib.Path, t
     assert door_key.task == "doorkey" and door_key.layout_name == "small-doorkey"
 
 
+def test_route_actions_are_a_list_of_ints_and_a_route_is_a_sequence_value(discover_run: pathlib.Path) -> None:
+    import copy
+    import pickle
+
+    graph = worldgraph.load_discover_run(discover_run)
+    a, b = farthest_pair(graph)
+    route = graph.route(a, b)
+    assert type(route.actions) is list and all(type(v) is int for v in route.actions)
+    assert json.loads(json.dumps(route.actions)) == route.actions
+    assert np.array(route.actions).shape == (len(route),)
+    assert list(route) == route.actions  # iterating a route gives its actions
+    assert route == graph.route(a, b) and hash(route) == hash(graph.route(a, b))
+    assert route != graph.route(b, a) and route != route.actions
+    assert pickle.loads(pickle.dumps(route)) == route and copy.deepcopy(route) == route
+    again = worldgraph.Route(route.start, route.actions, route.cells, route.nodes)
+    assert again == route
+    with pytest.raises(ValueError, match=r"actions and cells must have the same length"):
+        worldgraph.Route(route.start, route.actions, route.cells[:-1], route.nodes)
+    with pytest.raises(ValueError, match=r"actions\[0\] must be an int from 0 to 5"):
+        worldgraph.Route(route.start, [9], [route.cells[0]], route.nodes)
+
+
+def test_a_world_graph_pickles_copies_and_round_trips_through_json(discover_run: pathlib.Path) -> None:
+    import copy
+    import pickle
+
+    graph = worldgraph.load_discover_run(discover_run)
+    for other in (pickle.loads(pickle.dumps(graph)), copy.deepcopy(graph), worldgraph.WorldGraph.from_json(graph.to_json())):
+        assert other.nodes == graph.nodes and other.edges == graph.edges and other.task == graph.task
+        assert other.route(0, 1) == graph.route(0, 1)
+    with pytest.raises(worldgraph.PlanError):
+        worldgraph.WorldGraph.from_json('{"format": "something else"}')
+
+
 @pytest.mark.parametrize("facing", [4, 5, -1])
 def test_a_facing_out_of_range_is_a_value_error(discover_run: pathlib.Path, facing: int) -> None:
     graph = worldgraph.load_discover_run(discover_run)

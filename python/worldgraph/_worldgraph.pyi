@@ -7,6 +7,8 @@ integers are accepted wherever an ``int`` is.
 """
 
 import os
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -123,8 +125,18 @@ class Simulator:
 
 class Route:
     """A planned route: ``actions[i]`` (MiniGrid numbering) leaves the agent
-    on ``cells[i]``; ``nodes`` are the graph nodes passed, first to target."""
+    on ``cells[i]``; ``nodes`` are the graph nodes passed, first to target.
+    A value: equal routes compare equal and hash alike; iterating gives the
+    actions; routes pickle."""
 
+    def __init__(
+        self,
+        start: tuple[int, int, int],
+        actions: list[int],
+        cells: list[tuple[int, int]],
+        nodes: list[int],
+    ) -> None:
+        """A route from its parts (as pickling rebuilds it)."""
     @property
     def start(self) -> tuple[int, int, int]:
         """``(x, y, dir)`` the route starts from."""
@@ -135,14 +147,23 @@ class Route:
     @property
     def nodes(self) -> list[int]: ...
     def __len__(self) -> int: ...
+    def __iter__(self) -> Iterator[int]: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __hash__(self) -> int: ...
 
 class WorldGraph:
     """Pivotal states (nodes), edges with recorded action paths, and
-    all-pairs shortest paths (the planner's dynamic programme)."""
+    all-pairs shortest paths (the planner's dynamic programme). Immutable;
+    pickles (as its JSON text)."""
 
     @staticmethod
     def load(path: str | os.PathLike[str]) -> WorldGraph:
         """A graph saved by the planner (a discover run's ``graph.json``)."""
+    @staticmethod
+    def from_json(text: str) -> WorldGraph:
+        """A graph from the JSON text :meth:`to_json` (or ``save``) writes."""
+    def to_json(self) -> str:
+        """The graph as the JSON text ``save`` writes."""
     @staticmethod
     def build(
         nodes: list[tuple[int, int]],
@@ -192,3 +213,4 @@ class WorldGraph:
         (``grid``, ``carrying``) or the initial one."""
     def render(self, cell_px: int = 16) -> npt.NDArray[np.uint8]:
         """The maze with the graph drawn on it; ``cell_px`` 2 to 64."""
+    def __reduce__(self) -> tuple[Any, tuple[str]]: ...
