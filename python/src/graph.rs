@@ -1,7 +1,9 @@
 //! [`WorldGraph`] and its [`Route`]s: a `planner::WorldGraph` and its
 //! dynamic-programming routes (section 3.3).
 
-use pyo3::types::{PyIterator, PyList, PyType};
+use planner::RouteWorld;
+use pyo3::types::{PyIterator, PyList, PyTuple, PyType};
+use sim::Object;
 
 use super::simulator::cell_px_arg;
 use super::*;
@@ -122,6 +124,59 @@ pub(crate) struct WorldGraph {
     graph: planner::WorldGraph,
 }
 
+/// The node cells of `WorldGraph.build`'s `nodes` argument, in the order
+/// given, each inside the grid.
+fn node_cells(nodes: &Bound<'_, PyAny>, layout: &Layout) -> PyResult<Vec<CellIdx>> {
+    let mut cells = Vec::new();
+    for (i, item) in nodes.try_iter()?.enumerate() {
+        let item = item?;
+        let not_a_pair = || {
+            let shown = item.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+            PyValueError::new_err(format!(
+                "nodes[{i}] must be an (x, y) pair of ints, got {shown}"
+            ))
+        };
+        let pair: Vec<Bound<'_, PyAny>> = item.extract().map_err(|_| not_a_pair())?;
+        let [x, y] = pair.as_slice() else {
+            return Err(not_a_pair());
+        };
+        let (xi, yi) = (
+            x.extract::<Int>().map_err(|_| not_a_pair())?,
+            y.extract::<Int>().map_err(|_| not_a_pair())?,
+        );
+        let inside = |v: Int, side: usize| v.0.filter(|v| (0..side as i128).contains(v));
+        match (inside(xi, layout.width), inside(yi, layout.height)) {
+            (Some(cx), Some(cy)) => {
+                cells.push(CellIdx::from_xy(cx as usize, cy as usize, layout.width));
+            }
+            _ => {
+                return Err(PlanError::new_err(format!(
+                    "cell ({x}, {y}) is outside the {}x{} grid",
+                    layout.width, layout.height
+                )));
+            }
+        }
+    }
+    Ok(cells)
+}
+
+/// The cells a world-graph node may occupy in a task's maze or layout:
+/// floor, open doors and exits the agent can reach from its start.
+/// `WorldGraph.build` refuses any other cell.
+#[pyfunction]
+#[pyo3(signature = (task="multigoal", maze=None, layout=None))]
+pub(crate) fn standable_cells(
+    task: &str,
+    maze: Option<&str>,
+    layout: Option<&str>,
+) -> PyResult<Vec<(u16, u16)>> {
+    let layout = layout_of(parse_task(task)?, maze, layout)?;
+    Ok(planner::pivotal::v_all(&layout)
+        .iter()
+        .map(|c| c.xy(layout.width))
+        .collect())
+}
+
 impl WorldGraph {
     fn node(&self, id: Int) -> PyResult<NodeId> {
         let n = self.graph.num_nodes();
@@ -145,6 +200,91 @@ impl WorldGraph {
             cells: r.cells().iter().map(|c| c.xy(w)).collect(),
             nodes: r.nodes().iter().map(|n| n.0).collect(),
         }
+    }
+
+    /// The observation grid `grid` (`height × width` or flat, any integer
+    /// dtype, or nested lists) as cell codes in layout order, checked: the
+    /// shape, the codes, and its walls against the graph's layout (walls
+    /// never change, so a mismatch is a grid of another maze).
+    fn grid_cells(&self, grid: &Bound<'_, PyAny>) -> PyResult<Vec<u8>> {
+        let py = grid.py();
+        let l = self.graph.layout();
+        let (w, h) = (l.width, l.height);
+        let array = py
+            .import("numpy")?
+            .call_method1("asarray", (grid,))
+            .map_err(|e| {
+                PyValueError::new_err(format!(
+                    "grid must be an integer array of shape ({h}, {w}): {}",
+                    e.value(py)
+                ))
+            })?;
+        let array = array.cast::<PyUntypedArray>()?;
+        let kind = array.dtype().kind();
+        if kind != b'i' && kind != b'u' {
+            return Err(PyTypeError::new_err(format!(
+                "grid must be an integer array (the observation's \"grid\"), got dtype {}",
+                array.dtype().str()?
+            )));
+        }
+        if array.shape() != [h, w] && array.shape() != [h * w] {
+            return Err(PyValueError::new_err(format!(
+                "grid must have shape ({h}, {w}) or ({},), got {:?}",
+                h * w,
+                PyTuple::new(py, array.shape())?
+            )));
+        }
+        let flat = array
+            .call_method1("reshape", (-1,))?
+            .call_method1("astype", ("int64",))?;
+        let flat = flat.extract::<PyReadonlyArray1<'_, i64>>()?;
+        let wall = Object::Wall as u8;
+        let mut cells = Vec::with_capacity(w * h);
+        for (i, &v) in flat.as_array().iter().enumerate() {
+            let (x, y) = (i % w, i / w);
+            let code = u8::try_from(v)
+                .ok()
+                .filter(|&c| Object::from_code(c).is_some())
+                .ok_or_else(|| {
+                    PyValueError::new_err(format!(
+                        "grid[{y}, {x}] is {v}: cell codes are 0 to {}",
+                        sim::object::NUM_OBJECTS - 1
+                    ))
+                })?;
+            if (code == wall) != (l.cells[i] == wall) {
+                let what = if code == wall {
+                    "is a wall where the graph's layout has none"
+                } else {
+                    "is no wall where the graph's layout has one"
+                };
+                return Err(PyValueError::new_err(format!(
+                    "grid[{y}, {x}] {what}: grid is not of this graph's maze ({:?})",
+                    l.name
+                )));
+            }
+            cells.push(code);
+        }
+        Ok(cells)
+    }
+
+    /// Answers a route query: `query` plans into a route buffer in the
+    /// world `grid` and `carrying` describe (without a grid, the layout's
+    /// initial world).
+    fn plan(
+        &self,
+        grid: Option<&Bound<'_, PyAny>>,
+        carrying: Int,
+        query: impl FnOnce(RouteWorld, &mut planner::Route) -> Result<usize, PlannerError>,
+    ) -> PyResult<Route> {
+        let carrying = carrying.to::<u8>("carrying", 0)?;
+        let cells = grid.map(|g| self.grid_cells(g)).transpose()?;
+        let world = match &cells {
+            Some(c) => self.graph.observe_world(c, carrying),
+            None => self.graph.initial_world(),
+        };
+        let mut r = planner::Route::with_capacity(256, 16);
+        query(world, &mut r).map_err(plan_err)?;
+        Ok(self.route_object(&r))
     }
 }
 
@@ -177,20 +317,20 @@ impl WorldGraph {
     }
 
     /// Builds the graph over the given node cells `[(x, y), ...]` of a maze
-    /// or ASCII layout: edges from random walks (seeded by `seed`), each
-    /// shortened by an exact search, then all-pairs shortest paths. Cells
-    /// the agent cannot stand on are dropped (as when a discover run's
-    /// pivotal states are moved to the Door-Key variant of their maze).
-    /// `task` decides the walks' rules (Door-Key: balls block, the key and
-    /// doors work). `exhaustive=True` finds every edge random walks could
-    /// ever find, by a search over states, instead of the walks: the edges
-    /// that need the key fetched and the door opened on the way, which
-    /// walks stopping at the first node they meet rarely find.
+    /// or ASCII layout, node `i` on `nodes[i]`: edges from random walks
+    /// (seeded by `seed`), each shortened by an exact search, then
+    /// all-pairs shortest paths. A cell no node may occupy (see
+    /// `standable_cells`: walls, keys, balls, lava, closed doors, cells cut
+    /// off from the start), a duplicate or a cell outside the grid raises
+    /// `PlanError` naming it. `task` decides the walks' rules (Door-Key:
+    /// balls block, the key and doors work).
+    /// `exhaustive=True` finds every edge random walks could ever find, by
+    /// a search over states, instead of the walks.
     #[staticmethod]
     #[pyo3(signature = (nodes, task="multigoal", maze=None, layout=None, seed=Int(Some(0)), exhaustive=false))]
     fn build(
         py: Python<'_>,
-        nodes: Vec<(u16, u16)>,
+        nodes: &Bound<'_, PyAny>,
         task: &str,
         maze: Option<&str>,
         layout: Option<&str>,
@@ -200,20 +340,13 @@ impl WorldGraph {
         let seed = seed.to::<u64>("seed", 0)?;
         let task = parse_task(task)?;
         let layout = layout_of(task, maze, layout)?;
-        let mut cells = Vec::with_capacity(nodes.len());
-        for (x, y) in nodes {
-            if x as usize >= layout.width || y as usize >= layout.height {
-                return Err(PlanError::new_err(format!(
-                    "cell ({x}, {y}) is outside the {}x{} grid",
-                    layout.width, layout.height
-                )));
-            }
-            cells.push(CellIdx::from_xy(x as usize, y as usize, layout.width).0);
+        let cells = node_cells(nodes, &layout)?;
+        if cells.is_empty() {
+            return Err(PlanError::new_err(
+                "nodes is empty: give at least one (x, y) cell",
+            ));
         }
-        let given = planner::pivotal::nodes_from_cells(&layout, &cells);
-        if given.is_empty() {
-            return Err(PlanError::new_err("no node cell the agent can stand on"));
-        }
+        let given = planner::pivotal::check_nodes(&layout, &cells).map_err(plan_err)?;
         let cfg = PlannerConfig {
             candidates: planner::CandidateSet::Given,
             seed,
@@ -319,24 +452,35 @@ impl WorldGraph {
     }
 
     /// The route from node `start` (standing there facing `facing`, 0 to 3)
-    /// to node `target`, in the layout's initial world: the edges of the
-    /// shortest path, each edge's recorded actions in turn, with the turns
-    /// between edges. Raises `PlanError` for an unknown node or no path.
-    #[pyo3(signature = (start, target, facing=Int(Some(0))))]
-    fn route(&self, start: Int, target: Int, facing: Int) -> PyResult<Route> {
+    /// to node `target`: the edges of the shortest path, each edge's
+    /// recorded actions in turn, with the turns between edges. Planned in
+    /// the world `grid` (the observation's cell codes) and `carrying`
+    /// describe; without `grid`, in the layout's initial world. Raises
+    /// `PlanError` for an unknown node or no path.
+    #[pyo3(signature = (start, target, facing=Int(Some(0)), grid=None, carrying=Int(Some(255))))]
+    fn route(
+        &self,
+        start: Int,
+        target: Int,
+        facing: Int,
+        grid: Option<&Bound<'_, PyAny>>,
+        carrying: Int,
+    ) -> PyResult<Route> {
         let facing = facing.within("facing", 0, 3)? as u8;
-        let mut r = planner::Route::with_capacity(256, 16);
-        self.graph
-            .route_into(self.node(start)?, facing, self.node(target)?, &mut r)
-            .map_err(plan_err)?;
-        Ok(self.route_object(&r))
+        let (start, target) = (self.node(start)?, self.node(target)?);
+        self.plan(grid, carrying, |world, r| {
+            self.graph
+                .route_in_world_into(start, facing, target, world, r)
+        })
     }
 
     /// The route from any pose `(x, y, dir)` to node `target`: the shortest
     /// way to the nearest node, then the graph route. `grid` (the
-    /// observation's cell codes, `height × width`) and `carrying` (cell code,
-    /// 255 nothing) describe the current world (open doors, key in hand);
-    /// without them, the layout's initial world.
+    /// observation's `height × width` cell codes, or flat) and `carrying`
+    /// (cell code, 255 nothing) describe the current world: the doors it
+    /// shows open and the key in hand. The walls and the rest of the maze
+    /// are the graph's layout's (a grid whose walls differ is refused).
+    /// Without `grid`, the layout's initial world.
     #[pyo3(signature = (x, y, dir, target, grid=None, carrying=Int(Some(255))))]
     fn route_from_pose(
         &self,
@@ -344,7 +488,7 @@ impl WorldGraph {
         y: Int,
         dir: Int,
         target: Int,
-        grid: Option<Vec<u8>>,
+        grid: Option<&Bound<'_, PyAny>>,
         carrying: Int,
     ) -> PyResult<Route> {
         let l = self.graph.layout();
@@ -353,26 +497,10 @@ impl WorldGraph {
             y: y.within("y", 0, l.height as i128 - 1)? as u16,
             dir: dir.within("dir", 0, 3)? as u8,
         };
-        let carrying = carrying.to::<u8>("carrying", 0)?;
-        let world = match grid {
-            Some(g) => {
-                let l = self.graph.layout();
-                if g.len() != l.width * l.height {
-                    return Err(PyValueError::new_err(format!(
-                        "grid has {} cells, the layout {}",
-                        g.len(),
-                        l.width * l.height
-                    )));
-                }
-                self.graph.observe_world(&g, carrying)
-            }
-            None => self.graph.initial_world(),
-        };
-        let mut r = planner::Route::with_capacity(256, 16);
-        self.graph
-            .route_from_pose_into(pose, self.node(target)?, world, &mut r)
-            .map_err(plan_err)?;
-        Ok(self.route_object(&r))
+        let target = self.node(target)?;
+        self.plan(grid, carrying, |world, r| {
+            self.graph.route_from_pose_into(pose, target, world, r)
+        })
     }
 
     /// An RGB picture of the maze with the graph drawn on it; `cell_px`

@@ -217,7 +217,7 @@ fn check_layout(text: &str) -> PyResult<(usize, usize)> {
 mod graph;
 mod simulator;
 
-use graph::{Route, WorldGraph};
+use graph::{Route, WorldGraph, standable_cells};
 use simulator::Simulator;
 
 /// The native module.
@@ -228,6 +228,7 @@ fn _worldgraph(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Route>()?;
     m.add_function(wrap_pyfunction!(maze_text, m)?)?;
     m.add_function(wrap_pyfunction!(check_layout, m)?)?;
+    m.add_function(wrap_pyfunction!(standable_cells, m)?)?;
     m.add("LayoutError", m.py().get_type::<LayoutError>())?;
     m.add("ClosedError", m.py().get_type::<ClosedError>())?;
     m.add("PlanError", m.py().get_type::<PlanError>())?;

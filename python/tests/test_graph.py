@@ -185,3 +185,67 @@ def test_node_and_cell_arguments_out_of_range_are_named(discover_run: pathlib.Pa
         graph.route_from_pose(-1, 11, 0, 0)
     with pytest.raises(ValueError, match=r"carrying must be an int from 0 to 255, got -1"):
         graph.route_from_pose(1, 11, 0, 0, carrying=-1)
+
+
+def test_route_from_pose_takes_the_observation_grid_as_it_comes(discover_run: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    env = gym.make("worldgraph/MultiGoal-Small-v0")
+    obs, _ = env.reset(seed=0)
+    x, y, d, c = obs["agent"]  # NumPy uint8 scalars, as they come
+    target = farthest_pair(graph)[1]
+    plain = graph.route_from_pose(x, y, d, target)
+    assert obs["grid"].shape == (13, 13)
+    for grid in (obs["grid"], obs["grid"].reshape(-1), obs["grid"].tolist(), obs["grid"].reshape(-1).tolist(), obs["grid"].astype(np.int64)):
+        assert graph.route_from_pose(x, y, d, target, grid=grid, carrying=c) == plain
+        assert graph.route(0, target, grid=grid) == graph.route(0, target)
+    with pytest.raises(ValueError, match=r"grid must have shape \(13, 13\) or \(169,\), got \(4, 4\)"):
+        graph.route_from_pose(x, y, d, target, grid=np.zeros((4, 4), np.uint8))
+    bad = obs["grid"].copy()
+    bad[3, 2] = 9
+    with pytest.raises(ValueError, match=r"grid\[3, 2\] is 9: cell codes are 0 to 8"):
+        graph.route_from_pose(x, y, d, target, grid=bad)
+    with pytest.raises(TypeError, match=r"grid must be an integer array"):
+        graph.route_from_pose(x, y, d, target, grid=obs["grid"].astype(np.float32))
+    with pytest.raises(ValueError, match=r"grid must be an integer array of shape \(13, 13\): setting an array element"):
+        graph.route_from_pose(x, y, d, target, grid=[[0, 1], [0]])
+    # The walls are the graph's: a grid of another maze is refused, not half used.
+    other = obs["grid"].copy()
+    other[6, 3] = worldgraph.OBJECTS["wall"]
+    with pytest.raises(ValueError, match=r"grid\[6, 3\] is a wall where the graph's layout has none"):
+        graph.route_from_pose(x, y, d, target, grid=other)
+
+
+def test_build_refuses_nodes_it_cannot_keep_instead_of_dropping_them() -> None:
+    with pytest.raises(worldgraph.PlanError, match=r"cell \(0, 0\) holds wall"):
+        worldgraph.WorldGraph.build([(1, 1), (0, 0), (3, 3)], maze="small")
+    with pytest.raises(worldgraph.PlanError, match=r"cell \(1, 1\) is listed twice"):
+        worldgraph.WorldGraph.build([(1, 1), (3, 3), (1, 1)], maze="small")
+    sealed = "#########\n#>..#...#\n#..E#...#\n#########\n"
+    with pytest.raises(worldgraph.PlanError, match=r"cell \(5, 1\) holds a cell unreachable from the agent's start"):
+        worldgraph.WorldGraph.build([(1, 1), (5, 1)], layout=sealed)
+    with pytest.raises(worldgraph.PlanError, match=r"cell \(9, 2\) holds key 'K'"):
+        worldgraph.WorldGraph.build([(1, 11), (9, 2)], task="doorkey", maze="small")
+    with pytest.raises(worldgraph.PlanError, match=r"cell \(-1, 3\) is outside the 13x13 grid"):
+        worldgraph.WorldGraph.build([(1, 1), (-1, 3)], maze="small")
+    with pytest.raises(ValueError, match=r"nodes\[1\] must be an \(x, y\) pair of ints, got \(1, 1, 0\)"):
+        worldgraph.WorldGraph.build([(3, 3), (1, 1, 0)], maze="small")
+    # Valid nodes keep the ids they were given.
+    cells = [(3, 9), (1, 1), (11, 11), (5, 5)]
+    assert worldgraph.WorldGraph.build(cells, maze="small").nodes == cells
+    assert worldgraph.WorldGraph.build(np.array(cells), maze="small").nodes == cells
+    # The cells a node may occupy are listed, for filtering beforehand.
+    free = set(worldgraph.standable_cells(maze="small", task="doorkey"))
+    assert (9, 6) not in free and (9, 2) not in free and (6, 9) not in free  # a wall, the key, the locked door
+    assert {(1, 11), (8, 9)} <= free
+
+
+def test_replay_route_refuses_an_env_that_is_not_at_the_route_start(discover_run: pathlib.Path) -> None:
+    graph = worldgraph.load_discover_run(discover_run)
+    env = gym.make("worldgraph/MultiGoal-Small-v0", balls=0)
+    with pytest.raises(gym.error.ResetNeeded):
+        worldgraph.replay_route(env, graph.route(0, 1))
+    obs, _ = env.reset(seed=0)
+    route = graph.route(0, 1)
+    with pytest.raises(ValueError, match=r"the agent is at \(1, 11, 0\) but the route starts at"):
+        worldgraph.replay_route(env, route)
+    assert env.unwrapped.simulator.agent[0].tolist() == obs["agent"].tolist()  # nothing stepped

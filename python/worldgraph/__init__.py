@@ -15,14 +15,22 @@ MultiGoalStochastic, DoorKey and Maze in Small, Medium, Large, plus
 ``worldgraph/Custom-v0`` (keyword ``layout``: ASCII text; ``task``).
 
 The world graph: :func:`load_discover_run`, :class:`WorldGraph` (nodes,
-``route``, ``route_from_pose``), :func:`replay_route`.
+``route``, ``route_from_pose``), :func:`replay_route`, :func:`standable_cells`.
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-from ._worldgraph import ClosedError, LayoutError, PlanError, Simulator, check_layout, maze_text
+from ._worldgraph import (
+    ClosedError,
+    LayoutError,
+    PlanError,
+    Simulator,
+    check_layout,
+    maze_text,
+    standable_cells,
+)
 from .envs import ACTIONS, CARRYING_NOTHING, CELL_PX, NUM_OBJECTS, OBJECTS, WorldGraphEnv, WorldGraphVectorEnv, observation_space
 from .graph import Replay, Route, WorldGraph, load_discover_run, pivotal_states, replay_route
 
@@ -52,6 +60,7 @@ __all__ = [
     "pivotal_states",
     "register_envs",
     "replay_route",
+    "standable_cells",
 ]
 
 __version__ = "0.1.0"

@@ -33,6 +33,13 @@ def check_layout(text: str) -> tuple[int, int]:
     errors count lines and columns of the text as given. At most 64×64
     cells."""
 
+def standable_cells(
+    task: str = "multigoal", maze: str | None = None, layout: str | None = None
+) -> list[tuple[int, int]]:
+    """The cells ``(x, y)`` a world-graph node may occupy in a task's maze or
+    layout (floor, open doors, exits reachable from the start): the cells
+    :meth:`WorldGraph.build` accepts."""
+
 class Simulator:
     """A batch of maze environments stepped in parallel into NumPy arrays.
 
@@ -166,14 +173,17 @@ class WorldGraph:
         """The graph as the JSON text ``save`` writes."""
     @staticmethod
     def build(
-        nodes: list[tuple[int, int]],
+        nodes: npt.ArrayLike,
         task: str = "multigoal",
         maze: str | None = None,
         layout: str | None = None,
         seed: int = 0,
         exhaustive: bool = False,
     ) -> WorldGraph:
-        """The graph over the given node cells of a maze or layout."""
+        """The graph over the given node cells ``[(x, y), ...]`` of a maze or
+        layout, node ``i`` on ``nodes[i]``; a cell no node may occupy (see
+        :func:`standable_cells`), a duplicate or a cell outside the grid
+        raises :class:`PlanError`."""
     def save(self, path: str | os.PathLike[str]) -> None: ...
     @property
     def num_nodes(self) -> int: ...
@@ -197,20 +207,30 @@ class WorldGraph:
         """The node on cell ``(x, y)``, or None (also outside the grid)."""
     def distance(self, a: int, b: int) -> int | None:
         """Shortest distance from node ``a`` to node ``b``, or None."""
-    def route(self, start: int, target: int, facing: int = 0) -> Route:
-        """Node-to-node route in the layout's initial world, standing on
-        ``start`` facing ``facing`` (0 to 3)."""
+    def route(
+        self,
+        start: int,
+        target: int,
+        facing: int = 0,
+        grid: npt.ArrayLike | None = None,
+        carrying: int = 255,
+    ) -> Route:
+        """Node-to-node route, standing on ``start`` facing ``facing`` (0 to
+        3), in the observed world (``grid``: the observation's ``height ×
+        width`` cell codes, or flat; ``carrying``) or the layout's initial
+        one."""
     def route_from_pose(
         self,
         x: int,
         y: int,
         dir: int,
         target: int,
-        grid: list[int] | None = None,
+        grid: npt.ArrayLike | None = None,
         carrying: int = 255,
     ) -> Route:
         """Route from any pose to node ``target``, in the observed world
-        (``grid``, ``carrying``) or the initial one."""
+        (``grid``, ``carrying``: door states and the key in hand; the walls
+        are the graph's layout's) or the layout's initial one."""
     def render(self, cell_px: int = 16) -> npt.NDArray[np.uint8]:
         """The maze with the graph drawn on it; ``cell_px`` 2 to 64."""
     def __reduce__(self) -> tuple[Any, tuple[str]]: ...

@@ -13,6 +13,8 @@ import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gymnasium.error import ResetNeeded
+
 from . import _worldgraph as _native
 
 if TYPE_CHECKING:
@@ -65,9 +67,10 @@ def load_discover_run(
             f"the run's layout {maze!r} is not an embedded maze: build its Door-Key graph with "
             "WorldGraph.build(nodes, task='doorkey', layout=...)"
         )
-    return _native.WorldGraph.build(
-        pivotal_states(run_dir), task="doorkey", maze=maze, seed=seed, exhaustive=exhaustive
-    )
+    # WorldGraph.build refuses cells no node may occupy: leave them out here.
+    free = set(_native.standable_cells(task="doorkey", maze=maze))
+    nodes = [c for c in pivotal_states(run_dir) if c in free]
+    return _native.WorldGraph.build(nodes, task="doorkey", maze=maze, seed=seed, exhaustive=exhaustive)
 
 
 @dataclass
@@ -85,24 +88,40 @@ class Replay:
 
 
 def replay_route(env: WorldGraphEnv, route: _native.Route) -> Replay:
-    """Steps ``env`` (a :class:`worldgraph.WorldGraphEnv` standing at the
-    route's start) through the route's actions, stopping early if the
-    episode ends, and checks each step lands on the cell the route
-    predicted (raises ``AssertionError`` naming the step otherwise)."""
+    """Steps ``env`` (a :class:`worldgraph.WorldGraphEnv`, possibly wrapped,
+    standing at the route's start: plan from its pose with
+    :meth:`WorldGraph.route_from_pose`) through the route's actions,
+    stopping early if the episode ends, and checks that each step lands on
+    the cell the route predicted.
+
+    Before any step, raises ``ValueError`` when the agent is not at the
+    route's start, and ``gymnasium.error.ResetNeeded`` when the env was
+    never reset. A step landing elsewhere than predicted (a world other
+    than the one the route was planned in) raises
+    :class:`worldgraph.PlanError` naming the step.
+    """
+    sim = env.unwrapped.simulator
+    if not env.unwrapped._seeded:
+        raise ResetNeeded("reset() the env before replaying a route in it")
+    x, y, d = (int(v) for v in sim.agent[0][:3])
+    if (x, y, d) != tuple(route.start):
+        raise ValueError(
+            f"the agent is at {(x, y, d)} but the route starts at {tuple(route.start)}: "
+            "plan the route from the agent's pose (WorldGraph.route_from_pose)"
+        )
     total, term, trunc, steps = 0.0, False, False, 0
-    obs = None
     for i, (a, cell) in enumerate(zip(route.actions, route.cells)):
-        obs, r, term, trunc, _ = env.step(int(a))
+        obs, r, term, trunc, _ = env.step(a)
         total += r
         steps += 1
         if term or trunc:
             break
         got = (int(obs["agent"][0]), int(obs["agent"][1]))
         if got != tuple(cell):
-            raise AssertionError(f"step {i}: the agent is at {got}, the route expected {tuple(cell)}")
-    if obs is None:
-        s = env.unwrapped.simulator
-        x, y, d = (int(v) for v in s.agent[0][:3])
-    else:
-        x, y, d = (int(v) for v in obs["agent"][:3])
+            raise _native.PlanError(
+                f"step {i} of the route: the agent is at {got}, the route expected {tuple(cell)} "
+                "(the world is not the one the route was planned in)"
+            )
+    # The single env does not auto-reset: its agent is where the last action left it.
+    x, y, d = (int(v) for v in sim.agent[0][:3])
     return Replay(x, y, d, total, term, trunc, steps)
