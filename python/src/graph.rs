@@ -1,5 +1,14 @@
 //! [`WorldGraph`] and its [`Route`]s: a `planner::WorldGraph` and its
 //! dynamic-programming routes (section 3.3).
+//!
+//! ## Doors
+//! One world graph per maze serves every task on it (the project's rule,
+//! issue 47): [`WorldGraph::build`] finds the edges with every door of the
+//! layout open ([`doors_passable`]), so routes through a door exist. A
+//! route through a door is refused only while that door is closed: a query
+//! given the observed `grid` raises `DoorClosedError` when the route enters
+//! a door `grid` shows closed or locked ([`refuse_closed_doors`]); without
+//! a grid the route is planned in the graph's own world.
 
 use planner::RouteWorld;
 use pyo3::types::{PyIterator, PyList, PyTuple, PyType};
@@ -124,6 +133,18 @@ pub(crate) struct WorldGraph {
     graph: planner::WorldGraph,
 }
 
+/// `layout` with every door open: the world a graph's edges are found in
+/// (module docs, "Doors").
+fn doors_passable(layout: &Layout) -> Layout {
+    let mut open = layout.clone();
+    for c in &mut open.cells {
+        if Object::from_code(*c).is_some_and(Object::is_door) {
+            *c = Object::DoorOpen as u8;
+        }
+    }
+    open
+}
+
 /// The node cells of `WorldGraph.build`'s `nodes` argument, in the order
 /// given, each inside the grid.
 fn node_cells(nodes: &Bound<'_, PyAny>, layout: &Layout) -> PyResult<Vec<CellIdx>> {
@@ -161,8 +182,9 @@ fn node_cells(nodes: &Bound<'_, PyAny>, layout: &Layout) -> PyResult<Vec<CellIdx
 }
 
 /// The cells a world-graph node may occupy in a task's maze or layout:
-/// floor, open doors and exits the agent can reach from its start.
-/// `WorldGraph.build` refuses any other cell.
+/// floor, doors and exits the agent can reach from its start, doors
+/// counted passable (module docs, "Doors"). `WorldGraph.build` refuses
+/// any other cell.
 #[pyfunction]
 #[pyo3(signature = (task="multigoal", maze=None, layout=None))]
 pub(crate) fn standable_cells(
@@ -170,11 +192,31 @@ pub(crate) fn standable_cells(
     maze: Option<&str>,
     layout: Option<&str>,
 ) -> PyResult<Vec<(u16, u16)>> {
-    let layout = layout_of(parse_task(task)?, maze, layout)?;
+    let layout = doors_passable(&layout_of(parse_task(task)?, maze, layout)?);
     Ok(planner::pivotal::v_all(&layout)
         .iter()
         .map(|c| c.xy(layout.width))
         .collect())
+}
+
+/// The first door a route enters that `grid` shows closed or locked, as
+/// `DoorClosedError`.
+fn refuse_closed_doors(route: &planner::Route, grid: &[u8], width: usize) -> PyResult<()> {
+    for c in route.cells() {
+        let object = Object::from_code(grid[c.index()]);
+        if let Some(door @ (Object::DoorClosed | Object::DoorLocked)) = object {
+            let (x, y) = c.xy(width);
+            let (name, how) = match door {
+                Object::DoorLocked => ("locked door", "open it with the key"),
+                _ => ("closed door", "open it"),
+            };
+            return Err(DoorClosedError::new_err(format!(
+                "the route passes the {name} at ({x}, {y}), closed in `grid`: a route \
+                 through a door is refused while the door is closed; {how} and plan again"
+            )));
+        }
+    }
+    Ok(())
 }
 
 impl WorldGraph {
@@ -268,8 +310,9 @@ impl WorldGraph {
     }
 
     /// Answers a route query: `query` plans into a route buffer in the
-    /// world `grid` and `carrying` describe (without a grid, the layout's
-    /// initial world).
+    /// world `grid` and `carrying` describe (without a grid, the graph's
+    /// own), and the route is refused when it enters a door `grid` shows
+    /// closed ([`refuse_closed_doors`]).
     fn plan(
         &self,
         grid: Option<&Bound<'_, PyAny>>,
@@ -284,6 +327,9 @@ impl WorldGraph {
         };
         let mut r = planner::Route::with_capacity(256, 16);
         query(world, &mut r).map_err(plan_err)?;
+        if let Some(c) = &cells {
+            refuse_closed_doors(&r, c, self.graph.layout().width)?;
+        }
         Ok(self.route_object(&r))
     }
 }
@@ -320,10 +366,13 @@ impl WorldGraph {
     /// or ASCII layout, node `i` on `nodes[i]`: edges from random walks
     /// (seeded by `seed`), each shortened by an exact search, then
     /// all-pairs shortest paths. A cell no node may occupy (see
-    /// `standable_cells`: walls, keys, balls, lava, closed doors, cells cut
-    /// off from the start), a duplicate or a cell outside the grid raises
-    /// `PlanError` naming it. `task` decides the walks' rules (Door-Key:
-    /// balls block, the key and doors work).
+    /// `standable_cells`: walls, keys, balls, lava, cells cut off from the
+    /// start), a duplicate or a cell outside the grid raises `PlanError`
+    /// naming it. The edges are found with every door open, so a door cell
+    /// may be a node (one graph per maze serves every task; a route
+    /// through a door is refused while a query's `grid` shows it closed).
+    /// `task` decides the walks' other rules (Door-Key: balls block, the
+    /// key can be picked up).
     /// `exhaustive=True` finds every edge random walks could ever find, by
     /// a search over states, instead of the walks.
     #[staticmethod]
@@ -346,7 +395,10 @@ impl WorldGraph {
                 "nodes is empty: give at least one (x, y) cell",
             ));
         }
-        let given = planner::pivotal::check_nodes(&layout, &cells).map_err(plan_err)?;
+        // Doors are passable in the graph's world, so a door cell may be a
+        // node (routes to it are refused while it is closed).
+        let open = doors_passable(&layout);
+        let given = planner::pivotal::check_nodes(&open, &cells).map_err(plan_err)?;
         let cfg = PlannerConfig {
             candidates: planner::CandidateSet::Given,
             seed,
@@ -362,7 +414,7 @@ impl WorldGraph {
             ..PlannerConfig::default()
         };
         let graph = py
-            .detach(|| planner::WorldGraph::build(&layout, &cfg, &given))
+            .detach(|| planner::WorldGraph::build(&open, &cfg, &given))
             .map_err(plan_err)?;
         Ok(WorldGraph { graph })
     }
@@ -418,7 +470,8 @@ impl WorldGraph {
     fn height(&self) -> usize {
         self.graph.layout().height
     }
-    /// The graph's layout in its ASCII format.
+    /// The graph's layout in its ASCII format: the world its edges were
+    /// found in (a graph built here draws its doors open).
     #[getter]
     fn layout_text(&self) -> String {
         self.graph.layout().to_text()
@@ -455,8 +508,9 @@ impl WorldGraph {
     /// to node `target`: the edges of the shortest path, each edge's
     /// recorded actions in turn, with the turns between edges. Planned in
     /// the world `grid` (the observation's cell codes) and `carrying`
-    /// describe; without `grid`, in the layout's initial world. Raises
-    /// `PlanError` for an unknown node or no path.
+    /// describe, and refused with `DoorClosedError` when it enters a door
+    /// `grid` shows closed or locked; without `grid`, in the graph's own
+    /// world. Raises `PlanError` for an unknown node or no path.
     #[pyo3(signature = (start, target, facing=Int(Some(0)), grid=None, carrying=Int(Some(255))))]
     fn route(
         &self,
@@ -478,9 +532,10 @@ impl WorldGraph {
     /// way to the nearest node, then the graph route. `grid` (the
     /// observation's `height × width` cell codes, or flat) and `carrying`
     /// (cell code, 255 nothing) describe the current world: the doors it
-    /// shows open and the key in hand. The walls and the rest of the maze
-    /// are the graph's layout's (a grid whose walls differ is refused).
-    /// Without `grid`, the layout's initial world.
+    /// shows open or closed and the key in hand; a route entering a door
+    /// it shows closed or locked raises `DoorClosedError`. The walls and
+    /// the rest of the maze are the graph's layout's (a grid whose walls
+    /// differ is refused). Without `grid`, the graph's own world.
     #[pyo3(signature = (x, y, dir, target, grid=None, carrying=Int(Some(255))))]
     fn route_from_pose(
         &self,

@@ -48,6 +48,13 @@ create_exception!(
     PyValueError,
     "A world graph could not be loaded, built or queried (unknown node, no route, ...)."
 );
+create_exception!(
+    worldgraph,
+    DoorClosedError,
+    PlanError,
+    "A route passes a door that is closed or locked in the world the query describes: \
+     a route through a door is refused while the door is closed (open it and ask again)."
+);
 
 fn sim_err(e: SimError) -> PyErr {
     match e {
@@ -232,5 +239,6 @@ fn _worldgraph(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("LayoutError", m.py().get_type::<LayoutError>())?;
     m.add("ClosedError", m.py().get_type::<ClosedError>())?;
     m.add("PlanError", m.py().get_type::<PlanError>())?;
+    m.add("DoorClosedError", m.py().get_type::<DoorClosedError>())?;
     Ok(())
 }

@@ -285,7 +285,7 @@ def test_a_step_releases_the_gil() -> None:
     assert inside > 0, f"no sample in the first third of {len(windows)} steps"
 
 
-@pytest.mark.parametrize("name", ["LayoutError", "PlanError", "ClosedError"])
+@pytest.mark.parametrize("name", ["LayoutError", "PlanError", "ClosedError", "DoorClosedError"])
 def test_the_exceptions_pickle_and_live_in_the_worldgraph_module(name: str) -> None:
     import pickle
 

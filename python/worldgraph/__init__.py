@@ -16,6 +16,10 @@ MultiGoalStochastic, DoorKey and Maze in Small, Medium, Large, plus
 
 The world graph: :func:`load_discover_run`, :class:`WorldGraph` (nodes,
 ``route``, ``route_from_pose``), :func:`replay_route`, :func:`standable_cells`.
+
+Errors: :class:`LayoutError`, :class:`PlanError` and its
+:class:`DoorClosedError` (``ValueError`` subclasses), :class:`ClosedError`; all
+importable from ``worldgraph`` (and so picklable).
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import gymnasium as gym
 
 from ._worldgraph import (
     ClosedError,
+    DoorClosedError,
     LayoutError,
     PlanError,
     Simulator,
@@ -40,6 +45,7 @@ __all__ = [
     "CELL_PX",
     "CUSTOM_ID",
     "ClosedError",
+    "DoorClosedError",
     "ENV_IDS",
     "LayoutError",
     "MAZES",

@@ -22,6 +22,11 @@ class ClosedError(RuntimeError):
 class PlanError(ValueError):
     """A world graph could not be loaded, built or queried (unknown node, no route, ...)."""
 
+class DoorClosedError(PlanError):
+    """A route passes a door that is closed or locked in the world the query
+    describes: a route through a door is refused while the door is closed
+    (open it and ask again)."""
+
 def maze_text(maze: str, door_key: bool = False) -> str:
     """The ASCII text of an embedded maze (``small``, ``medium``, ``large``;
     ``door_key``: its Door-Key variant)."""
@@ -37,8 +42,8 @@ def standable_cells(
     task: str = "multigoal", maze: str | None = None, layout: str | None = None
 ) -> list[tuple[int, int]]:
     """The cells ``(x, y)`` a world-graph node may occupy in a task's maze or
-    layout (floor, open doors, exits reachable from the start): the cells
-    :meth:`WorldGraph.build` accepts."""
+    layout (floor, doors, exits reachable from the start, doors counted
+    passable): the cells :meth:`WorldGraph.build` accepts."""
 
 class Simulator:
     """A batch of maze environments stepped in parallel into NumPy arrays.
@@ -161,7 +166,12 @@ class Route:
 class WorldGraph:
     """Pivotal states (nodes), edges with recorded action paths, and
     all-pairs shortest paths (the planner's dynamic programme). Immutable;
-    pickles (as its JSON text)."""
+    pickles (as its JSON text).
+
+    One graph per maze serves every task on it: a graph built here finds
+    its edges with every door open, and a route query given the observed
+    ``grid`` raises :class:`DoorClosedError` while a door on the route is
+    closed or locked."""
 
     @staticmethod
     def load(path: str | os.PathLike[str]) -> WorldGraph:
@@ -217,8 +227,9 @@ class WorldGraph:
     ) -> Route:
         """Node-to-node route, standing on ``start`` facing ``facing`` (0 to
         3), in the observed world (``grid``: the observation's ``height ×
-        width`` cell codes, or flat; ``carrying``) or the layout's initial
-        one."""
+        width`` cell codes, or flat; ``carrying``) or the graph's own;
+        :class:`DoorClosedError` when it enters a door ``grid`` shows
+        closed."""
     def route_from_pose(
         self,
         x: int,
@@ -230,7 +241,9 @@ class WorldGraph:
     ) -> Route:
         """Route from any pose to node ``target``, in the observed world
         (``grid``, ``carrying``: door states and the key in hand; the walls
-        are the graph's layout's) or the layout's initial one."""
+        are the graph's layout's) or the graph's own;
+        :class:`DoorClosedError` when it enters a door ``grid`` shows
+        closed."""
     def render(self, cell_px: int = 16) -> npt.NDArray[np.uint8]:
         """The maze with the graph drawn on it; ``cell_px`` 2 to 64."""
     def __reduce__(self) -> tuple[Any, tuple[str]]: ...

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from gymnasium.error import ResetNeeded
 
 from . import _worldgraph as _native
+from .envs import OBJECTS
 
 if TYPE_CHECKING:
     from .envs import WorldGraphEnv
@@ -40,26 +41,28 @@ def pivotal_states(run_dir: str | os.PathLike[str]) -> list[tuple[int, int]]:
 
 
 def load_discover_run(
-    run_dir: str | os.PathLike[str], task: str | None = None, seed: int = 0, exhaustive: bool = True
+    run_dir: str | os.PathLike[str], task: str | None = None, seed: int = 0, exhaustive: bool = False
 ) -> _native.WorldGraph:
     """The world graph of a ``worldgraph discover`` run directory.
 
     Without ``task`` (or for a MultiGoal task), the run's ``graph.json`` as
-    discovered. For ``task="doorkey"``, the run's pivotal states moved to the
-    Door-Key variant of its maze (cells the agent cannot stand on there are
-    dropped) and the graph built again under Door-Key rules, as stage 2
-    does; its edges are shortened by an exact search instead of by ``π_g``
-    (which needs libtorch). With ``exhaustive`` (the default) the Door-Key
-    edges come from a search over states rather than random walks: a walk
-    stops at the first node it meets, so walks seldom find the edges that
-    fetch the key and open the door, and the graph would not cross the
-    door.
+    discovered. For ``task="doorkey"``, the graph of the maze's Door-Key
+    variant over the run's pivotal states: the states that variant can hold
+    (``standable_cells``; the passage it walls up is left out), in the run's
+    order, with edges built again by :meth:`WorldGraph.build` (random walks
+    seeded by ``seed``, or with ``exhaustive`` a search over states;
+    shortened by an exact search instead of by ``π_g``, which needs
+    libtorch). One world graph per maze serves every task on it: the edges
+    are found with the door passable, so routes through the door exist; a
+    route query given the observed ``grid`` raises
+    :class:`worldgraph.DoorClosedError` while the door is closed or locked,
+    and returns the route once it is open.
     """
     path = os.path.join(run_dir, "graph.json")
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path}: not a discover run directory (no graph.json)")
     graph = _native.WorldGraph.load(path)
-    if task is None or task.replace("_", "-").lower() != "doorkey" and task.lower() != "door-key":
+    if task is None or task.replace("_", "-").lower() not in ("doorkey", "door-key"):
         return graph
     maze = graph.layout_name
     if maze not in ("small", "medium", "large"):
@@ -95,9 +98,10 @@ def replay_route(env: WorldGraphEnv, route: _native.Route) -> Replay:
     the cell the route predicted.
 
     Before any step, raises ``ValueError`` when the agent is not at the
-    route's start, and ``gymnasium.error.ResetNeeded`` when the env was
-    never reset. A step landing elsewhere than predicted (a world other
-    than the one the route was planned in) raises
+    route's start and :class:`worldgraph.DoorClosedError` when the route
+    enters a door that is closed or locked now; ``gymnasium.error.ResetNeeded``
+    when the env was never reset. A step landing elsewhere than predicted
+    (a world other than the one the route was planned in) raises
     :class:`worldgraph.PlanError` naming the step.
     """
     sim = env.unwrapped.simulator
@@ -109,6 +113,15 @@ def replay_route(env: WorldGraphEnv, route: _native.Route) -> Replay:
             f"the agent is at {(x, y, d)} but the route starts at {tuple(route.start)}: "
             "plan the route from the agent's pose (WorldGraph.route_from_pose)"
         )
+    grid = sim.grid[0]
+    for cx, cy in route.cells:
+        code = int(grid[cy, cx])
+        if code in (OBJECTS["door_closed"], OBJECTS["door_locked"]):
+            kind = "locked" if code == OBJECTS["door_locked"] else "closed"
+            raise _native.DoorClosedError(
+                f"the route passes the {kind} door at ({cx}, {cy}), {kind} in the env: a route through "
+                "a door is refused while the door is closed; open it and plan again"
+            )
     total, term, trunc, steps = 0.0, False, False, 0
     for i, (a, cell) in enumerate(zip(route.actions, route.cells)):
         obs, r, term, trunc, _ = env.step(a)
