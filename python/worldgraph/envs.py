@@ -10,7 +10,8 @@
   observation is the next episode's first, and ``infos["final_obs"]`` /
   ``infos["final_info"]`` hold the finished episode's last observation and
   info, as Gymnasium's ``SyncVectorEnv`` does in that mode.
-- :class:`WorldGraphEnv` (``gymnasium.Env``): one maze, no auto-reset.
+- :class:`WorldGraphEnv` (``gymnasium.Env``): one maze, no auto-reset; a
+  step after the episode's end raises ``gymnasium.error.ResetNeeded``.
 
 Observations are a ``Dict``: ``"grid"``, the ``height × width`` uint8 cell
 codes (0 floor, 1 wall, 2 ball, 3 key, 4 open door, 5 closed door, 6 locked
@@ -34,7 +35,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.error import ClosedEnvironmentError
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -152,9 +153,11 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         render_mode: ``None`` or ``"rgb_array"``.
         cell_px: pixels per cell of rendered frames (2 to 64).
 
-    ``step`` returns ``info = {"balls": n}`` (balls collected so far), plus
-    ``"episode": {"r": return, "l": length}`` on the step that ends the
-    episode. Once an episode ends, call ``reset()``.
+    ``step`` returns ``info = {"balls": n}`` (balls collected so far). For
+    episode statistics wrap the env in
+    ``gymnasium.wrappers.RecordEpisodeStatistics`` (the env writes no
+    ``"episode"`` key of its own). Once an episode ends, call ``reset()``:
+    another step raises ``gymnasium.error.ResetNeeded``.
     """
 
     metadata = {"render_modes": _RENDER_MODES, "render_fps": 10}
@@ -187,6 +190,8 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         self.observation_space = observation_space(self._sim.width, self._sim.height)
         self.action_space = spaces.Discrete(self._sim.num_actions)
         self._seeded = False
+        # How the episode ended ("terminated" or "truncated"), until reset().
+        self._ended: str | None = None
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"grid": self._sim.grid[0].copy(), "agent": self._sim.agent[0].copy()}
@@ -209,11 +214,15 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         else:
             self._sim.reset()
         self._seeded = True
+        self._ended = None
         return self._obs(), {}
 
     def step(self, action: int) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """Takes one action (an int in ``0..num_actions``)."""
+        """Takes one action (an int in ``0..num_actions``). After the step
+        that ends an episode, raises ``ResetNeeded`` until ``reset()``."""
         self._check_open()
+        if self._ended is not None:
+            raise ResetNeeded(f"the episode ended ({self._ended}); call reset() before step()")
         if isinstance(action, np.ndarray) and action.shape == ():
             action = action.item()
         if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
@@ -221,10 +230,9 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         self._sim.step([int(action)])
         s = self._sim
         terminated, truncated = bool(s.terminated[0]), bool(s.truncated[0])
-        info: dict[str, Any] = {"balls": int(s.balls[0])}
         if terminated or truncated:
-            info["episode"] = {"r": float(s.episode_return[0]), "l": int(s.episode_length[0])}
-        return self._obs(), float(s.reward[0]), terminated, truncated, info
+            self._ended = "terminated" if terminated else "truncated"
+        return self._obs(), float(s.reward[0]), terminated, truncated, {"balls": int(s.balls[0])}
 
     def render(self) -> np.ndarray | None:
         """An RGB frame (``"rgb_array"`` mode), else None."""
@@ -262,9 +270,11 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
     object array holding that environment's last observation (None
     elsewhere, ``infos["_final_obs"]`` the mask) and ``infos["final_info"]``
     the finished episode's ``{"balls", "episode": {"r", "l"}}`` as batched
-    arrays with masks. The batched final observation is also
+    arrays with masks (``"episode"`` as ``RecordEpisodeStatistics`` writes
+    it for a single env). The batched final observation is also
     :attr:`final_obs` (valid where ``_final_obs``). Other steps' infos are
-    empty.
+    empty. Gymnasium's vector observation wrappers (``FlattenObservation``
+    and the like) refuse same-step auto-reset.
     """
 
     metadata = {"render_modes": _RENDER_MODES, "render_fps": 10, "autoreset_mode": AutoresetMode.SAME_STEP}
