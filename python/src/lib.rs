@@ -6,8 +6,12 @@
 //!   (no copy, stable addresses) with the GIL released, on the batch's own
 //!   rayon threads.
 //! - [`WorldGraph`]: a `planner::WorldGraph` (a `worldgraph discover` run's
-//!   `graph.json`, or one built here from given nodes) and its
-//!   dynamic-programming routes.
+//!   `graph.json`, or one built here from given nodes, its edges found with
+//!   the doors open) and its dynamic-programming routes ([`Route`]).
+//!
+//! Arguments are checked here, in Python's words: integers through [`Int`]
+//! (a `ValueError` naming the argument and its limits, never PyO3's bare
+//! `OverflowError`), layouts through `parse_layout` (triple-quoted strings).
 //!
 //! The Gymnasium classes (`worldgraph.WorldGraphEnv`,
 //! `worldgraph.WorldGraphVectorEnv`) are thin Python over these; see
