@@ -54,3 +54,26 @@ def discover_run(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     graph.save(run / "graph.json")
     (run / "pivotal.json").write_text(json.dumps([list(c) for c in cells]))
     return run
+
+
+@pytest.fixture(scope="session")
+def real_run(tmp_path_factory: pytest.TempPathFactory):
+    """`real_run(maze, seed)`: a directory shaped like a `worldgraph
+    discover` run of the paper-real grid (results/paper-real/{maze}/discover/
+    seed-{seed}.json): its pivotal states, with the MultiGoal graph the
+    planner builds over them."""
+    import worldgraph
+
+    made: dict[tuple[str, int], pathlib.Path] = {}
+
+    def make(maze: str, seed: int) -> pathlib.Path:
+        if (maze, seed) not in made:
+            report = REPO / "results" / "paper-real" / maze / "discover" / f"seed-{seed}.json"
+            cells = [tuple(c) for c in json.loads(report.read_text())["summary"]["pivotal_cells"]]
+            run = tmp_path_factory.mktemp(f"discover-{maze}-{seed}")
+            worldgraph.WorldGraph.build(cells, task="multigoal", maze=maze, seed=seed).save(run / "graph.json")
+            (run / "pivotal.json").write_text(json.dumps([list(c) for c in cells]))
+            made[maze, seed] = run
+        return made[maze, seed]
+
+    return make

@@ -86,7 +86,7 @@ def test_terminated_and_truncated_are_separate() -> None:
     env.reset(seed=0)
     _, r, term, trunc, info = env.step(worldgraph.ACTIONS["forward"])
     assert (term, trunc) == (True, False) and r == pytest.approx(0.99)
-    assert info["episode"] == {"r": pytest.approx(0.99), "l": 1}
+    assert info == {"balls": 0}  # episode statistics are RecordEpisodeStatistics' to write
     env.reset()
     for t in range(3):
         _, r, term, trunc, _ = env.step(worldgraph.ACTIONS["left"])
@@ -283,3 +283,152 @@ def test_a_step_releases_the_gil() -> None:
     assert windows, "the steps were too short to tell"
     inside = sum(1 for s in samples for a, b in windows if a < s < b)
     assert inside > 0, f"no sample in the first third of {len(windows)} steps"
+
+
+def run_episode(env: gym.Env, seed: int = 0) -> tuple[int, dict]:
+    """Steps `env` with sampled actions until its episode ends; returns the
+    steps taken and the last info."""
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    for t in range(1, 100_000):
+        _, _, term, trunc, info = env.step(env.action_space.sample())
+        if term or trunc:
+            return t, info
+    raise AssertionError("the episode never ended")
+
+
+def test_record_episode_statistics_rounds_full_episodes() -> None:
+    env = gym.wrappers.RecordEpisodeStatistics(gym.make("worldgraph/MultiGoal-Small-v0", max_steps=40))
+    returns = []
+    for seed in range(3):
+        steps, info = run_episode(env, seed)
+        assert info["episode"]["l"] == steps and info["balls"] >= 0
+        returns.append(info["episode"]["r"])
+    assert list(env.length_queue) == [40, 40, 40] or len(env.length_queue) == 3
+    assert list(env.return_queue) == pytest.approx(returns)
+    # The vector wrapper over the vector env, same-step auto-reset.
+    envs = gym.wrappers.vector.RecordEpisodeStatistics(gym.make_vec("worldgraph/MultiGoal-Small-v0", num_envs=3, max_steps=10))
+    envs.reset(seed=0)
+    for _ in range(25):
+        _, _, term, trunc, info = envs.step(np.zeros(3, dtype=np.int64))
+    assert list(envs.length_queue) == [10] * 6
+
+
+def test_time_limit_and_flatten_observation_round_full_episodes() -> None:
+    env = gym.wrappers.TimeLimit(gym.make("worldgraph/MultiGoal-Small-v0"), max_episode_steps=7)
+    for seed in range(2):
+        steps, _ = run_episode(env, seed)
+        assert steps <= 7
+    flat = gym.wrappers.FlattenObservation(gym.make("worldgraph/DoorKey-Small-v0", max_steps=30))
+    obs, _ = flat.reset(seed=0)
+    assert obs.shape == (4 + 13 * 13,) and obs in flat.observation_space
+    steps, _ = run_episode(flat)
+    assert steps == 30
+    obs, _ = flat.reset(seed=1)
+    assert obs in flat.observation_space
+
+
+def test_stepping_a_finished_episode_raises_reset_needed() -> None:
+    """Gymnasium leaves a step after the end undefined; here it is refused,
+    so an episode is never recorded twice."""
+    env = gym.wrappers.RecordEpisodeStatistics(gym.make("worldgraph/Custom-v0", layout=EXIT_AHEAD))
+    env.reset(seed=0)
+    _, _, term, _, _ = env.step(worldgraph.ACTIONS["forward"])
+    assert term
+    with pytest.raises(gym.error.ResetNeeded, match=r"the episode ended \(terminated\); call reset\(\)"):
+        env.step(worldgraph.ACTIONS["forward"])
+    assert env.episode_count == 1
+    env.reset()
+    env.step(worldgraph.ACTIONS["left"])  # a reset makes it steppable again
+    truncating = gym.make("worldgraph/Custom-v0", layout=EXIT_AHEAD, max_steps=1)
+    truncating.reset(seed=0)
+    assert truncating.step(worldgraph.ACTIONS["left"])[3]
+    with pytest.raises(gym.error.ResetNeeded, match=r"\(truncated\)"):
+        truncating.step(worldgraph.ACTIONS["left"])
+    # Gymnasium's own auto-reset wrapper and SyncVectorEnv still work over it.
+    auto = gym.wrappers.Autoreset(gym.make("worldgraph/Custom-v0", layout=EXIT_AHEAD))
+    auto.reset(seed=0)
+    for t in range(6):
+        _, _, term, _, _ = auto.step(worldgraph.ACTIONS["forward"])
+        assert term == (t % 2 == 0)
+    sync = gym.make_vec("worldgraph/Custom-v0", num_envs=2, vectorization_mode="sync", layout=EXIT_AHEAD)
+    sync.reset(seed=0)
+    for t in range(6):
+        _, _, term, _, _ = sync.step(np.full(2, worldgraph.ACTIONS["forward"]))
+        assert term.tolist() == [t % 2 == 0] * 2
+
+
+def test_envs_refuse_pickling_and_copying_with_a_clear_error() -> None:
+    import copy
+    import pickle
+
+    env = gym.make("worldgraph/MultiGoal-Small-v0")
+    envs = gym.make_vec("worldgraph/MultiGoal-Small-v0", num_envs=2)
+    sim = worldgraph.Simulator("multigoal", maze="small")
+    for obj, name in ((env, "WorldGraphEnv"), (envs, "WorldGraphVectorEnv"), (sim, "Simulator")):
+        for attempt in (pickle.dumps, copy.deepcopy):
+            with pytest.raises(TypeError, match=rf"{name} cannot be pickled or copied"):
+                attempt(obj)
+        # (copy.copy of a Gymnasium wrapper copies the wrapper alone, sharing the env.)
+        with pytest.raises(TypeError, match=rf"{name} cannot be pickled or copied"):
+            copy.copy(getattr(obj, "unwrapped", obj))
+
+
+@pytest.mark.parametrize("name", ["LayoutError", "PlanError", "ClosedError", "DoorClosedError"])
+def test_the_exceptions_pickle_and_live_in_the_worldgraph_module(name: str) -> None:
+    import pickle
+
+    cls = getattr(worldgraph, name)
+    assert cls.__module__ == "worldgraph"
+    again = pickle.loads(pickle.dumps(cls("why")))
+    assert type(again) is cls and str(again) == "why"
+    with pytest.raises(cls):
+        raise again
+
+
+def test_close_from_another_thread_waits_for_the_step_in_progress() -> None:
+    import threading
+    import time
+
+    n = 200_000
+    envs = worldgraph.WorldGraphVectorEnv(n, task="multigoal", maze="medium", threads=1)
+    envs.reset(seed=0)
+    actions = np.full(n, 2, dtype=np.uint8)
+    outcomes: list[object] = []
+    started = threading.Event()
+
+    def stepper() -> None:
+        try:
+            for _ in range(1000):
+                started.set()
+                envs.step(actions)
+            outcomes.append("finished")
+        except Exception as e:  # noqa: BLE001 - the test inspects it
+            outcomes.append(e)
+
+    thread = threading.Thread(target=stepper)
+    thread.start()
+    started.wait()
+    time.sleep(0.01)
+    envs.close()  # waits for the step in progress, then closes
+    thread.join()
+    assert envs.closed and len(outcomes) == 1
+    assert isinstance(outcomes[0], ClosedEnvironmentError), outcomes[0]
+    # Two threads stepping one simulator take turns instead of failing.
+    sim = worldgraph.Simulator("multigoal", maze="medium", num_envs=n, threads=1)
+    errors: list[Exception] = []
+
+    def step_some() -> None:
+        try:
+            for _ in range(5):
+                sim.step(actions)
+                _ = sim.closed, sim.seed, sim.agent
+        except Exception as e:  # noqa: BLE001
+            errors.append(e)
+
+    threads = [threading.Thread(target=step_some) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []

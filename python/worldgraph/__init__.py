@@ -15,22 +15,37 @@ MultiGoalStochastic, DoorKey and Maze in Small, Medium, Large, plus
 ``worldgraph/Custom-v0`` (keyword ``layout``: ASCII text; ``task``).
 
 The world graph: :func:`load_discover_run`, :class:`WorldGraph` (nodes,
-``route``, ``route_from_pose``), :func:`replay_route`.
+``route``, ``route_from_pose``), :func:`replay_route`, :func:`standable_cells`.
+
+Errors: :class:`LayoutError`, :class:`PlanError` and its
+:class:`DoorClosedError` (``ValueError`` subclasses), :class:`ClosedError`; all
+importable from ``worldgraph`` (and so picklable).
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-from ._worldgraph import ClosedError, LayoutError, PlanError, Simulator, check_layout, maze_text
-from .envs import ACTIONS, CARRYING_NOTHING, NUM_OBJECTS, OBJECTS, WorldGraphEnv, WorldGraphVectorEnv, observation_space
+from ._worldgraph import (
+    ClosedError,
+    DoorClosedError,
+    LayoutError,
+    PlanError,
+    Simulator,
+    check_layout,
+    maze_text,
+    standable_cells,
+)
+from .envs import ACTIONS, CARRYING_NOTHING, CELL_PX, NUM_OBJECTS, OBJECTS, WorldGraphEnv, WorldGraphVectorEnv, observation_space
 from .graph import Replay, Route, WorldGraph, load_discover_run, pivotal_states, replay_route
 
 __all__ = [
     "ACTIONS",
     "CARRYING_NOTHING",
+    "CELL_PX",
     "CUSTOM_ID",
     "ClosedError",
+    "DoorClosedError",
     "ENV_IDS",
     "LayoutError",
     "MAZES",
@@ -51,6 +66,7 @@ __all__ = [
     "pivotal_states",
     "register_envs",
     "replay_route",
+    "standable_cells",
 ]
 
 __version__ = "0.1.0"

@@ -10,7 +10,8 @@
   observation is the next episode's first, and ``infos["final_obs"]`` /
   ``infos["final_info"]`` hold the finished episode's last observation and
   info, as Gymnasium's ``SyncVectorEnv`` does in that mode.
-- :class:`WorldGraphEnv` (``gymnasium.Env``): one maze, no auto-reset.
+- :class:`WorldGraphEnv` (``gymnasium.Env``): one maze, no auto-reset; a
+  step after the episode's end raises ``gymnasium.error.ResetNeeded``.
 
 Observations are a ``Dict``: ``"grid"``, the ``height × width`` uint8 cell
 codes (0 floor, 1 wall, 2 ball, 3 key, 4 open door, 5 closed door, 6 locked
@@ -19,6 +20,11 @@ door, 7 exit, 8 lava), and ``"agent"``, uint8 ``[x, y, dir, carrying]``
 nothing). Actions use MiniGrid's numbering: 0 left, 1 right, 2 forward (the
 MultiGoal tasks use these three), 3 pickup, 4 drop, 5 toggle (Door-Key uses
 all six).
+
+Integer arguments out of range raise ``ValueError`` naming the argument and
+its limits; seeds may be NumPy integers (0 to 2**64 - 1). The environments
+cannot be pickled or copied (their state lives in the Rust simulator): make
+another with the same arguments and seed.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.error import ClosedEnvironmentError
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -56,6 +62,9 @@ OBJECTS = {
 ACTIONS = {"left": 0, "right": 1, "forward": 2, "pickup": 3, "drop": 4, "toggle": 5}
 
 _RENDER_MODES = ["rgb_array"]
+#: Pixels per cell of rendered frames: the native renderer's limits.
+CELL_PX = (2, 64)
+_MAX_SEED = 2**64 - 1
 
 
 def observation_space(width: int, height: int) -> spaces.Dict:
@@ -77,9 +86,29 @@ def _new_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**63 - 1))
 
 
-def _check_render_mode(render_mode: str | None) -> None:
+def _check_render_args(render_mode: str | None, cell_px: int) -> None:
     if render_mode is not None and render_mode not in _RENDER_MODES:
         raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+    lo, hi = CELL_PX
+    if isinstance(cell_px, bool) or not isinstance(cell_px, (int, np.integer)):
+        raise TypeError(f"cell_px must be an int, got {type(cell_px).__name__}")
+    if not lo <= cell_px <= hi:
+        raise ValueError(f"cell_px must be an int from {lo} to {hi}, got {cell_px}")
+
+
+def _seed_arg(seed: Any) -> int | None:
+    """``reset``'s seed as a Python int (NumPy integers included, as
+    Gymnasium's checks allow them and its seeding does not), or None."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(
+            f"seed must be one int (environment i is seeded from (seed, i)), got {type(seed).__name__}"
+        )
+    seed = int(seed)
+    if not 0 <= seed <= _MAX_SEED:
+        raise ValueError(f"seed must be an int from 0 to {_MAX_SEED}, got {seed}")
+    return seed
 
 
 class _OnSimulator:
@@ -95,6 +124,15 @@ class _OnSimulator:
     def _check_open(self) -> None:
         if self._sim.closed:
             raise ClosedEnvironmentError("the environment is closed; make a new one")
+
+    def __reduce_ex__(self, protocol: Any) -> Any:
+        """Pickling and copying are refused (also ``copy.copy`` and
+        ``copy.deepcopy``): the environments' state lives in the Rust
+        simulator."""
+        raise TypeError(
+            f"{type(self).__name__} cannot be pickled or copied: its state lives in the Rust simulator; "
+            "make another with the same arguments (gym.make / gym.make_vec) and reset it with the same seed"
+        )
 
 
 class WorldGraphEnv(_OnSimulator, gym.Env):
@@ -113,11 +151,13 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         balls: balls spawned per episode in the MultiGoal tasks (default 5;
             0: only the layout's ``B`` cells).
         render_mode: ``None`` or ``"rgb_array"``.
-        cell_px: pixels per cell of rendered frames.
+        cell_px: pixels per cell of rendered frames (2 to 64).
 
-    ``step`` returns ``info = {"balls": n}`` (balls collected so far), plus
-    ``"episode": {"r": return, "l": length}`` on the step that ends the
-    episode. Once an episode ends, call ``reset()``.
+    ``step`` returns ``info = {"balls": n}`` (balls collected so far). For
+    episode statistics wrap the env in
+    ``gymnasium.wrappers.RecordEpisodeStatistics`` (the env writes no
+    ``"episode"`` key of its own). Once an episode ends, call ``reset()``:
+    another step raises ``gymnasium.error.ResetNeeded``.
     """
 
     metadata = {"render_modes": _RENDER_MODES, "render_fps": 10}
@@ -132,7 +172,7 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         render_mode: str | None = None,
         cell_px: int = 16,
     ) -> None:
-        _check_render_mode(render_mode)
+        _check_render_args(render_mode, cell_px)
         self._sim = _native.Simulator(
             task,
             maze=None if layout is not None else maze,
@@ -150,6 +190,8 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         self.observation_space = observation_space(self._sim.width, self._sim.height)
         self.action_space = spaces.Discrete(self._sim.num_actions)
         self._seeded = False
+        # How the episode ended ("terminated" or "truncated"), until reset().
+        self._ended: str | None = None
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"grid": self._sim.grid[0].copy(), "agent": self._sim.agent[0].copy()}
@@ -157,25 +199,30 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Starts a new episode. ``seed`` re-seeds the environment's own
-        stream (the same seed gives the same episodes); ``options`` takes no
-        keys."""
+        """Starts a new episode. ``seed`` (an int or NumPy integer, 0 to
+        2**64 - 1) re-seeds the environment's own stream (the same seed gives
+        the same episodes); ``options`` takes no keys."""
         self._check_open()
-        super().reset(seed=seed)
+        seed = _seed_arg(seed)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}: none are supported")
+        super().reset(seed=seed)
         if seed is not None:
-            self._sim.reset(seed=int(seed))
+            self._sim.reset(seed=seed)
         elif not self._seeded:
             self._sim.reset(seed=_new_seed(self.np_random))
         else:
             self._sim.reset()
         self._seeded = True
+        self._ended = None
         return self._obs(), {}
 
     def step(self, action: int) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """Takes one action (an int in ``0..num_actions``)."""
+        """Takes one action (an int in ``0..num_actions``). After the step
+        that ends an episode, raises ``ResetNeeded`` until ``reset()``."""
         self._check_open()
+        if self._ended is not None:
+            raise ResetNeeded(f"the episode ended ({self._ended}); call reset() before step()")
         if isinstance(action, np.ndarray) and action.shape == ():
             action = action.item()
         if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
@@ -183,10 +230,9 @@ class WorldGraphEnv(_OnSimulator, gym.Env):
         self._sim.step([int(action)])
         s = self._sim
         terminated, truncated = bool(s.terminated[0]), bool(s.truncated[0])
-        info: dict[str, Any] = {"balls": int(s.balls[0])}
         if terminated or truncated:
-            info["episode"] = {"r": float(s.episode_return[0]), "l": int(s.episode_length[0])}
-        return self._obs(), float(s.reward[0]), terminated, truncated, info
+            self._ended = "terminated" if terminated else "truncated"
+        return self._obs(), float(s.reward[0]), terminated, truncated, {"balls": int(s.balls[0])}
 
     def render(self) -> np.ndarray | None:
         """An RGB frame (``"rgb_array"`` mode), else None."""
@@ -208,12 +254,13 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
         num_envs: number of environments.
         task, maze, layout, max_steps, balls, render_mode, cell_px: as
             :class:`WorldGraphEnv`.
-        threads: threads stepping the batch (default: one per 256
-            environments, at most the cores; below a few hundred
-            environments waking a second thread costs more than the step,
-            and on a loaded machine one thread can beat two at any size).
-            Results never depend on it: environment ``i`` draws from its
-            own stream seeded by ``(seed, i)``.
+        threads: threads stepping the batch, at least 1; more than the
+            cores this process may use are capped at the cores (default:
+            one per 256 environments, at most the cores; below a few
+            hundred environments waking a second thread costs more than
+            the step, and on a loaded machine one thread can beat two at
+            any size). Results never depend on it: environment ``i`` draws
+            from its own stream seeded by ``(seed, i)``.
         copy: return copies of the observation and reward arrays instead of
             the simulator's buffers (default False: zero copy; the arrays
             returned are rewritten by the next ``step``/``reset``).
@@ -223,9 +270,11 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
     object array holding that environment's last observation (None
     elsewhere, ``infos["_final_obs"]`` the mask) and ``infos["final_info"]``
     the finished episode's ``{"balls", "episode": {"r", "l"}}`` as batched
-    arrays with masks. The batched final observation is also
+    arrays with masks (``"episode"`` as ``RecordEpisodeStatistics`` writes
+    it for a single env). The batched final observation is also
     :attr:`final_obs` (valid where ``_final_obs``). Other steps' infos are
-    empty.
+    empty. Gymnasium's vector observation wrappers (``FlattenObservation``
+    and the like) refuse same-step auto-reset.
     """
 
     metadata = {"render_modes": _RENDER_MODES, "render_fps": 10, "autoreset_mode": AutoresetMode.SAME_STEP}
@@ -243,7 +292,7 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
         cell_px: int = 16,
         copy: bool = False,
     ) -> None:
-        _check_render_mode(render_mode)
+        _check_render_args(render_mode, cell_px)
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
         if threads is None:
@@ -281,18 +330,16 @@ class WorldGraphVectorEnv(_OnSimulator, VectorEnv):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Starts a new episode in every environment; ``seed`` (one int)
-        seeds environment ``i`` from ``(seed, i)``. ``options`` takes no keys."""
+        """Starts a new episode in every environment; ``seed`` (one int or
+        NumPy integer, 0 to 2**64 - 1) seeds environment ``i`` from
+        ``(seed, i)``. ``options`` takes no keys."""
         self._check_open()
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
-            raise TypeError(
-                f"seed must be one int (environment i is seeded from (seed, i)), got {type(seed).__name__}"
-            )
+        seed = _seed_arg(seed)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}: none are supported")
         super().reset(seed=seed)
         if seed is not None:
-            self._sim.reset(seed=int(seed))
+            self._sim.reset(seed=seed)
         else:
             self._sim.reset()
         return self._observation(), {}
