@@ -199,11 +199,12 @@ pub fn episode_picture(
         if o.balls > 0 {
             title.push_str(&format!(", {} of {} balls", o.collected, o.balls));
         }
+        let at = |step: Option<u32>| step.map(|k| format!(" at step {k}")).unwrap_or_default();
         if o.key_taken {
-            title.push_str(", key taken");
+            title.push_str(&format!(", key taken{}", at(t.key_step)));
         }
         if o.door_opened {
-            title.push_str(", door opened");
+            title.push_str(&format!(", door opened{}", at(t.door_step)));
         }
         title.push_str(if o.exited {
             ", exited"

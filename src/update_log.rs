@@ -214,6 +214,15 @@ pub struct UpdateLog {
 }
 
 impl UpdateLog {
+    /// The rows of the log of the run in `dir` (a half-written last line
+    /// left out).
+    pub fn read(dir: &Path) -> anyhow::Result<Vec<UpdateRow>> {
+        let path = dir.join(UPDATES_CSV);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        Ok(text.lines().skip(1).filter_map(UpdateRow::parse).collect())
+    }
+
     /// Opens the log of the run in `dir`, keeping the rows up to
     /// `keep_through` env steps (the checkpoint the run resumes from; 0 for
     /// a fresh run). `hierarchy`: the Manager's figures are logged too.

@@ -552,6 +552,11 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     curves(&state.rows, &summary)
         .render(900, 520)
         .save_png(&dir.join("curves.png"))?;
+    if a.task == Task::DoorKey {
+        object_curves(&UpdateLog::read(&dir)?, &summary)
+            .render(900, 520)
+            .save_png(&dir.join(OBJECTS_PNG))?;
+    }
     // The trace is environment 0's episode: test seed 0.
     episode_picture(&layout, &trace, agent.graph(), &cfg.agent, a.task, 0)
         .save_png(&dir.join("episode.png"))?;
@@ -561,6 +566,38 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         print_summary(&summary, &test, &dir);
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// Door-Key's picture of how the task's steps were learnt.
+const OBJECTS_PNG: &str = "objects.png";
+
+/// Door-Key: per update, the shares of the training episodes that took the
+/// key, opened the door and reached the exit, and of the Manager's
+/// decisions that named the key or the locked door.
+fn object_curves(rows: &[UpdateRow], s: &TestSummary) -> LineChart {
+    let line = |name: &str, f: fn(&UpdateRow) -> f64| Series {
+        name: name.into(),
+        points: rows.iter().map(|r| (r.env_steps as f64, f(r))).collect(),
+    };
+    let mut series = vec![
+        line("episodes that took the key", |r| r.key_taken_share),
+        line("episodes that opened the door", |r| r.door_share),
+        line("episodes that reached the exit", |r| r.exit_share),
+    ];
+    if rows.iter().any(|r| r.intervals > 0) {
+        series.push(line("decisions naming the key", |r| r.key_goal_share));
+        series.push(line("decisions naming the locked door", |r| r.door_goal_share));
+    }
+    LineChart {
+        title: format!(
+            "Door-Key, {} on {} (seed {}): the key, the door, the exit",
+            s.agent, s.maze, s.seed
+        ),
+        x_label: "env steps".into(),
+        y_label: "share (per update)".into(),
+        series,
+        x_scale: XScale::Linear,
+    }
 }
 
 fn curves(rows: &[MetricsRow], s: &TestSummary) -> LineChart {
@@ -632,7 +669,8 @@ fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
         println!("  {k:<50} {v:>12}");
     }
     println!(
-        "  files: config.toml metrics.csv updates.csv tensorboard/ invocations.txt curves.png test.json episode.png"
+        "  files: config.toml metrics.csv updates.csv tensorboard/ invocations.txt curves.png test.json episode.png{}",
+        if s.task == Task::DoorKey.name() { " objects.png" } else { "" }
     );
 }
 

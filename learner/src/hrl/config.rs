@@ -146,7 +146,9 @@ pub struct AgentConfig {
     /// on it — picking the key up, opening the door — not by stepping onto
     /// it ([`super::worker`]). Off: goals are cells to step onto and `V`
     /// holds standable cells only. Changes nothing on a layout without
-    /// keys or closed doors.
+    /// keys or closed doors. A wide goal on an object is its own narrow
+    /// goal (the object is exact already: the interval ends when the
+    /// Worker acts on it).
     pub object_goals: bool,
     /// Door-Key's action set ([`DoorKeyActions`]).
     pub door_key_actions: DoorKeyActions,

@@ -60,6 +60,9 @@ pub(super) struct ManagerSide {
     pub(super) candidates: Vec<u32>,
     /// The narrow window (WN).
     pub(super) window: Option<Window>,
+    /// [`AgentConfig::object_goals`]: a wide goal on an object is its own
+    /// narrow goal.
+    object_goals: bool,
     /// Where the decisions run: [`GradPath::RustCore`] in the own kernels
     /// ([`OwnManager`]), any other path in tch.
     path: GradPath,
@@ -220,6 +223,7 @@ impl ManagerSide {
             opt,
             candidates,
             window,
+            object_goals: cfg.object_goals,
             path: GradPath::default(),
             own: std::sync::Mutex::new(None),
         }
@@ -368,7 +372,18 @@ impl ManagerSide {
             locals.push(window.local_input(obs, e, gw));
             let mut valid = window.valid(gw);
             let here = obs.meta[e].cell(self.width) as u32;
-            if let Some(k) = window.slot_of(gw, here)
+            let object = obs
+                .env_cells(e)
+                .get(gw as usize)
+                .and_then(|&c| sim::Object::from_code(c))
+                .is_some_and(sim::Object::is_acted_on);
+            if self.object_goals && object {
+                // An object goal (the key, a closed door) is exact already:
+                // the narrow goal is the object itself, so the interval
+                // ends when the Worker acts on it.
+                let centre = window.slot_of(gw, gw).expect("the centre is in its window");
+                valid.iter_mut().enumerate().for_each(|(k, v)| *v = k == centre);
+            } else if let Some(k) = window.slot_of(gw, here)
                 && valid.iter().filter(|&&v| v).count() > 1
             {
                 valid[k] = false;

@@ -91,6 +91,14 @@ pub struct EpisodeTrace {
     /// collected. Empty when the transport carries no final cells.
     #[serde(default)]
     pub end_cells: Vec<u8>,
+    /// Door-Key: the step (1 for the first) after which the key was in
+    /// hand, if it was taken.
+    #[serde(default)]
+    pub key_step: Option<u32>,
+    /// The step after which a door that was not open at the start was
+    /// open, if one was opened.
+    #[serde(default)]
+    pub door_step: Option<u32>,
 }
 
 /// Counts of one rollout or evaluation.
@@ -257,8 +265,20 @@ impl Tracing<'_> {
         t.cells.push(cell);
         t.traversed.push(traversed);
         self.step += 1;
+        let cpe = obs.width * obs.height;
+        if t.key_step.is_none() && obs.meta[e].end_carrying == sim::Object::Key as u8 {
+            t.key_step = Some(self.step);
+        }
+        let grid = if ended {
+            obs.final_cells.get(e * cpe..(e + 1) * cpe).unwrap_or(&[])
+        } else {
+            obs.env_cells(e)
+        };
+        let open = |g: &[u8]| g.iter().filter(|&&c| c == sim::Object::DoorOpen as u8).count();
+        if t.door_step.is_none() && !t.start_cells.is_empty() && open(grid) > open(&t.start_cells) {
+            t.door_step = Some(self.step);
+        }
         if ended {
-            let cpe = obs.width * obs.height;
             t.end_cells = obs
                 .final_cells
                 .get(e * cpe..(e + 1) * cpe)
