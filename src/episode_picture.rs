@@ -383,6 +383,7 @@ mod tests {
             episode_return: 0.99,
             start_cells,
             end_cells,
+            ..EpisodeTrace::default()
         };
         (layout, t, a, b, exit)
     }
