@@ -408,7 +408,8 @@ mod tests {
         // The events hold the same scalars (wall times aside): one
         // TensorBoard file, the version record, then one record per
         // scalar, with `charts/episodic_return`, `charts/exit_share`,
-        // `charts/key_share` and `charts/door_share` only where episodes
+        // `charts/key_share`, `charts/door_share` and
+        // `charts/key_taken_share` only where episodes
         // ended.
         let events = |d: &Path| {
             let files: Vec<_> = std::fs::read_dir(d.join(TENSORBOARD_DIR))
@@ -421,7 +422,7 @@ mod tests {
         let (ra, rb) = (records(&ea), records(&eb));
         assert_eq!(ra.len(), rb.len());
         let with_return = (1..=6).filter(|u| u % 3 != 0).count();
-        assert_eq!(ra.len(), 1 + 6 * 4 + 4 * with_return);
+        assert_eq!(ra.len(), 1 + 6 * 4 + 5 * with_return);
         let tagged = |rs: &[&[u8]], tag: &str| {
             rs.iter()
                 .filter(|r| r.windows(tag.len()).any(|w| w == tag.as_bytes()))

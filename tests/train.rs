@@ -306,7 +306,10 @@ fn a_killed_run_resumes_and_ends_as_an_uninterrupted_one() {
     assert_eq!(rows.len(), 1 + 20, "{rows:?}");
     assert!(rows[0].starts_with("update,env_steps,episodes,episodic_return,policy_loss"));
     assert!(
-        rows[0].ends_with(",exit_share,exit_goal_share,ball_goal_share,key_share,door_share"),
+        rows[0].ends_with(
+            ",exit_share,exit_goal_share,ball_goal_share,key_share,door_share,\
+             key_taken_share,key_goal_share,door_goal_share"
+        ),
         "{}",
         rows[0]
     );
