@@ -205,6 +205,12 @@ impl UpdateRow {
     }
 }
 
+/// The rows of an `updates.csv` text, its header and any malformed line
+/// (one a killed process left half written) left out.
+fn parse_rows(text: &str) -> Vec<UpdateRow> {
+    text.lines().skip(1).filter_map(UpdateRow::parse).collect()
+}
+
 /// The open log of a run (module docs).
 pub struct UpdateLog {
     csv: File,
@@ -220,7 +226,7 @@ impl UpdateLog {
         let path = dir.join(UPDATES_CSV);
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("cannot read {}", path.display()))?;
-        Ok(text.lines().skip(1).filter_map(UpdateRow::parse).collect())
+        Ok(parse_rows(&text))
     }
 
     /// Opens the log of the run in `dir`, keeping the rows up to
@@ -229,10 +235,8 @@ impl UpdateLog {
     pub fn open(dir: &Path, keep_through: u64, hierarchy: bool) -> anyhow::Result<UpdateLog> {
         let path = dir.join(UPDATES_CSV);
         let kept: Vec<UpdateRow> = match std::fs::read_to_string(&path) {
-            Ok(text) => text
-                .lines()
-                .skip(1)
-                .filter_map(UpdateRow::parse)
+            Ok(text) => parse_rows(&text)
+                .into_iter()
                 .filter(|r| r.env_steps <= keep_through)
                 .collect(),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),

@@ -112,15 +112,19 @@ impl HrlAgent {
             .iter()
             .map(|&i| self.actions[i as usize])
             .collect();
-        let goal_objects = ctl
-            .goals()
-            .enumerate()
-            .map(|(e, g)| {
-                let grid = obs.env_cells(e);
-                let at = |c: u32| (c, grid.get(c as usize).copied().unwrap_or(0));
-                [at(g.wide), at(g.narrow)]
-            })
-            .collect();
+        // Only object goals are judged on the objects under the goals.
+        let goal_objects = if self.cfg.object_goals && self.manager.is_some() {
+            ctl.goals()
+                .enumerate()
+                .map(|(e, g)| {
+                    let grid = obs.env_cells(e);
+                    let at = |c: u32| (c, grid.get(c as usize).copied().unwrap_or(0));
+                    [at(g.wide), at(g.narrow)]
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         let traversals: Vec<Option<&Traversal>> =
             ctl.envs.iter().map(|c| c.traversal.as_ref()).collect();
         let steered = self.traverser.actions(
