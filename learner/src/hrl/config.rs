@@ -157,6 +157,24 @@ pub struct AgentConfig {
     /// FeUdal Networks' Worker is paid `r^I + α r` (Vezhnevets et al.
     /// 2017, eq. 6). 0: the paper's Worker, paid by the Manager alone.
     pub worker_task_share: f32,
+    /// How the Worker's actions that `π_g` lacks (Door-Key's pick and open)
+    /// start under `π_g` initialisation ([`ObjectActionInit`]).
+    pub object_action_init: ObjectActionInit,
+}
+
+/// How the policy rows of the actions `π_g` does not have start when the
+/// Worker is initialised from `π_g` (section 4.4 is silent: `π_g` only
+/// moves).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObjectActionInit {
+    /// Freshly drawn, as any untrained layer.
+    #[default]
+    Fresh,
+    /// Copies of `π_g`'s `forward` row: acting on an object goal in front
+    /// is what stepping onto a cell goal in front is, so the Worker starts
+    /// as ready to pick and open there as to step forward.
+    Forward,
 }
 
 /// The actions of the Worker (and the baseline) on Door-Key.
@@ -196,6 +214,7 @@ impl Default for AgentConfig {
             object_goals: true,
             door_key_actions: DoorKeyActions::default(),
             worker_task_share: 0.0,
+            object_action_init: ObjectActionInit::default(),
         }
     }
 }

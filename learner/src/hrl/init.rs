@@ -13,7 +13,7 @@
 
 use tch::{Tensor, nn};
 
-use super::config::AgentConfig;
+use super::config::{AgentConfig, ObjectActionInit};
 use crate::a2c::input::GOAL_CHANNEL;
 use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
@@ -84,6 +84,25 @@ pub fn copy_goal_plane(src: &nn::VarStore, dst: &nn::VarStore, goal_channel: usi
     });
 }
 
+/// Starts the policy rows past `π_g`'s own (Door-Key's pick and open) as
+/// copies of its `forward` row: acting on an object goal in front is what
+/// stepping onto a cell goal in front is ([`ObjectActionInit::Forward`]).
+pub fn copy_forward_row(src: &nn::VarStore, dst: &nn::VarStore) {
+    let (from, to) = (src.variables(), dst.variables());
+    tch::no_grad(|| {
+        for name in ["policy.weight", "policy.bias"] {
+            let (Some(s), Some(d)) = (from.get(name), to.get(name)) else {
+                continue;
+            };
+            let (own, all) = (s.size()[0], d.size()[0]);
+            let forward = s.narrow(0, i64::from(sim::action::FORWARD), 1);
+            for k in own..all {
+                d.narrow(0, k, 1).copy_(&forward);
+            }
+        }
+    });
+}
+
 /// Initialises an agent of `cfg` from `gcp` (module docs): the Worker's
 /// weights `worker` (encoder, core, heads, the goal plane) and the
 /// Manager's encoder in `manager`. `π_g`'s sizes must be the agent's.
@@ -110,6 +129,9 @@ pub fn from_pi_g(
         &["encoder", "core", "policy", "value"],
     );
     copy_goal_plane(gcp.var_store(), worker, GOAL_CHANNEL);
+    if cfg.object_action_init == ObjectActionInit::Forward {
+        copy_forward_row(gcp.var_store(), worker);
+    }
     if let Some(vs) = manager {
         let m = copy_from(gcp.var_store(), vs, &["encoder"]);
         report
@@ -169,6 +191,14 @@ mod tests {
                 .equal(&Tensor::zeros([3, 16], (tch::Kind::Float, Device::Cpu)))
         );
         assert_eq!(report.copied.len() + report.partial.len(), d.len());
+        // Pick and open started from π_g's forward row.
+        copy_forward_row(&src, &worker_vs);
+        let d = worker_vs.variables();
+        for k in 3..6 {
+            assert!(d["policy.weight"].narrow(0, k, 1).equal(&s["policy.weight"].narrow(0, 2, 1)));
+            assert!(d["policy.bias"].narrow(0, k, 1).equal(&s["policy.bias"].narrow(0, 2, 1)));
+        }
+        assert!(d["policy.weight"].narrow(0, 0, 3).equal(&s["policy.weight"]), "π_g's rows stay");
 
         // A Manager trunk without the goal channel: the encoder is copied,
         // the first convolution without its goal plane; the core is not.

@@ -54,7 +54,10 @@ pub mod wide_narrow;
 pub mod worker;
 
 pub use agent::HrlAgent;
-pub use config::{AgentConfig, AgentKind, Candidates, HandOver, WorkerTaskEnd, WorldGraphInputs};
+pub use config::{
+    AgentConfig, AgentKind, Candidates, DoorKeyActions, HandOver, ObjectActionInit, WorkerTaskEnd,
+    WorldGraphInputs,
+};
 pub use controller::SavedController;
 pub use stats::{EpisodeTrace, EvalResult, IterationStats};
 
