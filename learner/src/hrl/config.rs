@@ -160,6 +160,12 @@ pub struct AgentConfig {
     /// How the Worker's actions that `π_g` lacks (Door-Key's pick and open)
     /// start under `π_g` initialisation ([`ObjectActionInit`]).
     pub object_action_init: ObjectActionInit,
+    /// The exit's cell joins the wide-goal candidates `V` (and the world
+    /// graph's nodes), as the task's objects do with `object_goals`. Off,
+    /// the exit is a narrow goal only, reachable from the windows of the
+    /// candidates near it (on the small Door-Key maze from one wide goal
+    /// in about twenty, at a window's corner).
+    pub exit_candidate: bool,
 }
 
 /// How the policy rows of the actions `π_g` does not have start when the
@@ -215,6 +221,7 @@ impl Default for AgentConfig {
             door_key_actions: DoorKeyActions::default(),
             worker_task_share: 0.0,
             object_action_init: ObjectActionInit::default(),
+            exit_candidate: false,
         }
     }
 }
@@ -269,6 +276,25 @@ impl AgentConfig {
             (false, DoorKeyActions::PickOpen) => &[LEFT, RIGHT, FORWARD, PICKUP, TOGGLE],
             (false, DoorKeyActions::Minigrid) => &[LEFT, RIGHT, FORWARD, PICKUP, DROP, TOGGLE],
         }
+    }
+
+    /// The cells that join the wide-goal candidates `V` beyond its own
+    /// (`V_all`'s standable cells, `V_rand`, `V_p`) on `layout`: the task's
+    /// objects with [`AgentConfig::object_goals`], the exit with
+    /// [`AgentConfig::exit_candidate`].
+    pub fn extra_candidates(&self, layout: &Layout) -> Vec<u32> {
+        let mut v = if self.object_goals {
+            layout.object_cells()
+        } else {
+            Vec::new()
+        };
+        if self.exit_candidate {
+            v.extend(
+                (0..layout.cells.len() as u32)
+                    .filter(|&c| layout.cells[c as usize] == sim::Object::Exit as u8),
+            );
+        }
+        v
     }
 
     /// The Manager horizon `c`.

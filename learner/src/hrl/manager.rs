@@ -160,15 +160,17 @@ impl ManagerSide {
     ) -> ManagerSide {
         let (width, height) = (layout.width, layout.height);
         let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
-            // V_all: every standable cell, and with object goals the
-            // cells of the task's objects (the key, closed doors).
+            // V_all: every standable cell, and the cells
+            // `AgentConfig::extra_candidates` adds (the task's objects).
             (AgentKind::WideNarrow, Candidates::All) => {
                 let mut v: Vec<u32> = planner::pivotal::v_all(layout)
                     .iter()
                     .map(|c| c.0)
                     .collect();
-                if cfg.object_goals {
-                    v.extend(layout.object_cells());
+                for c in cfg.extra_candidates(layout) {
+                    if !v.contains(&c) {
+                        v.push(c);
+                    }
                 }
                 v
             }

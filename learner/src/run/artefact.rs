@@ -217,14 +217,14 @@ pub fn load_gcp(dir: &Path, layout: &Layout) -> anyhow::Result<GoalConditionedPo
 /// while the door is closed. `V_p` as discovered (kept as it is when it
 /// was discovered on that structure; otherwise its nodes standable there,
 /// re-walked), or `V_rand` of the same size with edges formed the same way
-/// (random walks, then `π_g` refinement); with `object_goals`, the cells
-/// of the task's objects (keys, closed doors) join the nodes, so traversal
-/// can bring the agent in front of them.
+/// (random walks, then `π_g` refinement); the `extra` cells
+/// ([`AgentConfig::extra_candidates`]: the task's objects, the exit) join
+/// the nodes, so traversal can bring the agent to them.
 pub fn world_graph_for(
     dir: &Path,
     layout: &Layout,
     candidates: Candidates,
-    object_goals: bool,
+    extra: &[u32],
     seed: u64,
     gcp: &mut GoalConditionedPolicy,
 ) -> anyhow::Result<planner::WorldGraph> {
@@ -243,12 +243,7 @@ pub fn world_graph_for(
             )
         })
         .collect();
-    let objects = if object_goals {
-        layout.object_cells()
-    } else {
-        Vec::new()
-    };
-    if candidates == Candidates::Pivotal && same_structure && objects.is_empty() {
+    if candidates == Candidates::Pivotal && same_structure && extra.is_empty() {
         return Ok(discovered);
     }
     let cells: Vec<u32> = match candidates {
@@ -258,7 +253,7 @@ pub fn world_graph_for(
             .map(|c| c.0)
             .collect(),
     };
-    let nodes = planner::pivotal::nodes_from_cells(&structure, &[cells, objects].concat());
+    let nodes = planner::pivotal::nodes_from_cells(&structure, &[&cells[..], extra].concat());
     let cfg = planner::PlannerConfig {
         candidates: planner::CandidateSet::Given,
         seed,
@@ -288,7 +283,7 @@ pub fn build_agent(
                     dir,
                     layout,
                     cfg.candidates,
-                    cfg.object_goals,
+                    &cfg.extra_candidates(layout),
                     seed,
                     &mut gcp,
                 )?)
