@@ -491,6 +491,24 @@ pub enum WorkerTaskEnd {
 mod tests {
     use super::*;
 
+    /// The candidates beyond `V`'s own are the layout's: Door-Key's key and
+    /// locked door with object goals, its exit with the exit candidate, and
+    /// nothing on a maze without them.
+    #[test]
+    fn extra_candidates_are_the_task_objects_and_the_exit_as_set() {
+        let dk = sim::Maze::Small.layout(true);
+        let at = |x, y| dk.cell_index(x, y) as u32;
+        let (key, door, exit) = (at(9, 2), at(6, 9), at(11, 11));
+        let mut cfg = AgentConfig::default();
+        assert_eq!(cfg.extra_candidates(&dk), vec![key, door]);
+        cfg.exit_candidate = true;
+        assert_eq!(cfg.extra_candidates(&dk), vec![key, door, exit]);
+        cfg.object_goals = false;
+        assert_eq!(cfg.extra_candidates(&dk), vec![exit]);
+        let plain = sim::Maze::Small.layout(false);
+        assert!(AgentConfig::default().extra_candidates(&plain).is_empty());
+    }
+
     /// Every configuration a grid can name parses back to itself, carries
     /// the paper's label, and says whether it needs a discovery run; the
     /// names no agent has are refused.
