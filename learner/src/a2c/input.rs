@@ -35,7 +35,7 @@ pub const OBJECT_CHANNELS: usize = sim::object::NUM_OBJECTS;
 /// Object channels + 4 agent facings + 1 carried key.
 pub const BASE_CHANNELS: usize = OBJECT_CHANNELS + 5;
 /// Channel of the carried-key plane.
-const KEY_CHANNEL: usize = OBJECT_CHANNELS + 4;
+pub const KEY_CHANNEL: usize = OBJECT_CHANNELS + 4;
 /// Channel marking the first goal slot's cell (goal-conditioned networks
 /// only); slot `k` marks channel `GOAL_CHANNEL + k`.
 pub const GOAL_CHANNEL: usize = BASE_CHANNELS;

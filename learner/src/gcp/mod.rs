@@ -112,6 +112,10 @@ pub struct GoalConditionedPolicy {
     state: LstmState,
     /// The rollout being collected (its buffers are reused).
     rollout: Rollout,
+    /// Object kinds of the maze `π_g` was trained on: their input planes
+    /// carry trained weights, the others only their initial draw
+    /// ([`Self::trained_kinds`]).
+    trained_kinds: [bool; sim::object::NUM_OBJECTS],
 }
 
 impl std::fmt::Debug for GoalConditionedPolicy {
@@ -123,6 +127,19 @@ impl std::fmt::Debug for GoalConditionedPolicy {
             .field("pending_trajectories", &self.book.finished.len())
             .finish_non_exhaustive()
     }
+}
+
+/// The object kinds present in `layout` (floor and wall always).
+fn kinds_of(layout: &Layout) -> [bool; sim::object::NUM_OBJECTS] {
+    let mut kinds = [false; sim::object::NUM_OBJECTS];
+    kinds[sim::Object::Floor as usize] = true;
+    kinds[sim::Object::Wall as usize] = true;
+    for &c in &layout.cells {
+        if let Some(k) = kinds.get_mut(c as usize) {
+            *k = true;
+        }
+    }
+    kinds
 }
 
 /// Largest reconstruction error (nats) that counts as curiosity: twice the
@@ -189,7 +206,23 @@ impl GoalConditionedPolicy {
                 layout.height,
                 1,
             ),
+            trained_kinds: kinds_of(layout),
         })
+    }
+
+    /// Records that `π_g` was trained on `maze` (a policy loaded for
+    /// another layout of the same size: a discovery's `π_g` serving a
+    /// Door-Key run of its maze).
+    pub fn set_trained_on(&mut self, maze: &Layout) {
+        self.trained_kinds = kinds_of(maze);
+    }
+
+    /// Which object kinds (indexed by code) the maze `π_g` was trained on
+    /// holds: the input planes of the others were never non-zero in
+    /// training, so their first-layer weights are still the initial random
+    /// draw. Floor and wall always count.
+    pub fn trained_kinds(&self) -> [bool; sim::object::NUM_OBJECTS] {
+        self.trained_kinds
     }
 
     /// Starts a round of the discovery loop from the weights alone: goal

@@ -166,6 +166,47 @@ pub struct AgentConfig {
     /// candidates near it (on the small Door-Key maze from one wide goal
     /// in about twenty, at a window's corner).
     pub exit_candidate: bool,
+    /// How the first-layer weights of inputs `π_g` never saw start under
+    /// `π_g` initialisation ([`UnseenInputs`]).
+    pub unseen_inputs: UnseenInputs,
+    /// How the Wide-then-Narrow Worker's `g_n` plane starts under `π_g`
+    /// initialisation ([`NarrowPlaneInit`]).
+    pub narrow_plane_init: NarrowPlaneInit,
+}
+
+/// How the first-layer weights of the inputs `π_g` never saw in training
+/// start when an agent is initialised from `π_g` (section 4.4 is silent).
+/// Discovery trains `π_g` on the maze's structure without balls, so the
+/// planes of the task's objects (balls, keys, locked doors, lava) and of
+/// the carried key were zero throughout its training: their weights are
+/// still `π_g`'s initial random draw, and copied they make an unfamiliar
+/// object act on the copied policy as an arbitrary perturbation (a
+/// carried key can turn `π_g` away from its goal).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UnseenInputs {
+    /// An object kind `π_g`'s maze lacked starts as floor (the cell as the
+    /// world graph's structure has it, [`sim::Layout::structural`]), and
+    /// the carried-key plane at zero: the Worker starts out as `π_g`
+    /// does on the structure and learns what the objects change.
+    #[default]
+    AsFloor,
+    /// Copied as they are (the behaviour until this setting).
+    Copied,
+}
+
+/// How the Wide-then-Narrow Worker's second goal plane (`g_n`; the first
+/// marks `g_w`) starts under `π_g` initialisation: `π_g` has one goal
+/// plane, the Worker two.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NarrowPlaneInit {
+    /// A copy of `π_g`'s goal plane: both goals are cells to reach.
+    #[default]
+    PiGGoal,
+    /// Fresh (the behaviour until this setting: the copy was meant but
+    /// looked the weights up under a name they do not have).
+    Fresh,
 }
 
 /// How the policy rows of the actions `π_g` does not have start when the
@@ -222,6 +263,8 @@ impl Default for AgentConfig {
             worker_task_share: 0.0,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: false,
+            unseen_inputs: UnseenInputs::default(),
+            narrow_plane_init: NarrowPlaneInit::default(),
         }
     }
 }

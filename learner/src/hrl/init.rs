@@ -13,8 +13,8 @@
 
 use tch::{Tensor, nn};
 
-use super::config::{AgentConfig, ObjectActionInit};
-use crate::a2c::input::GOAL_CHANNEL;
+use super::config::{AgentConfig, NarrowPlaneInit, ObjectActionInit, UnseenInputs};
+use crate::a2c::input::{GOAL_CHANNEL, KEY_CHANNEL, OBJECT_CHANNELS};
 use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
 
@@ -67,7 +67,6 @@ pub fn copy_from(src: &nn::VarStore, dst: &nn::VarStore, prefixes: &[&str]) -> I
 /// Wide-then-Narrow Worker marks `g_w` and `g_n` on planes of their own,
 /// and both are cells to reach, as `π_g`'s one goal is.
 pub fn copy_goal_plane(src: &nn::VarStore, dst: &nn::VarStore, goal_channel: usize) {
-    const CONV1: &str = "encoder/conv1/weight";
     let (from, to) = (src.variables(), dst.variables());
     let (Some(s), Some(d)) = (from.get(CONV1), to.get(CONV1)) else {
         return;
@@ -81,6 +80,27 @@ pub fn copy_goal_plane(src: &nn::VarStore, dst: &nn::VarStore, goal_channel: usi
         for k in planes_src..planes_dst {
             d.narrow(1, k, 1).copy_(&s.narrow(1, g, 1));
         }
+    });
+}
+
+/// The first convolution's weights, `[out, planes, 3, 3]`.
+const CONV1: &str = "encoder.conv1.weight";
+
+/// Starts the input planes of `dst`'s first convolution that `π_g` never
+/// saw ([`UnseenInputs::AsFloor`]): each object kind not in `trained`
+/// (indexed by code) as a copy of the floor plane, the carried-key plane
+/// at zero. `dst` is the Worker's or the Manager's store.
+pub fn unseen_planes_as_floor(dst: &nn::VarStore, trained: &[bool; OBJECT_CHANNELS]) {
+    let vars = dst.variables();
+    let Some(w) = vars.get(CONV1) else {
+        return;
+    };
+    tch::no_grad(|| {
+        let floor = w.narrow(1, sim::Object::Floor as i64, 1).copy();
+        for (kind, _) in trained.iter().enumerate().filter(|(_, seen)| !**seen) {
+            w.narrow(1, kind as i64, 1).copy_(&floor);
+        }
+        let _ = w.narrow(1, KEY_CHANNEL as i64, 1).fill_(0.0);
     });
 }
 
@@ -128,12 +148,20 @@ pub fn from_pi_g(
         worker,
         &["encoder", "core", "policy", "value"],
     );
-    copy_goal_plane(gcp.var_store(), worker, GOAL_CHANNEL);
+    if cfg.narrow_plane_init == NarrowPlaneInit::PiGGoal {
+        copy_goal_plane(gcp.var_store(), worker, GOAL_CHANNEL);
+    }
     if cfg.object_action_init == ObjectActionInit::Forward {
         copy_forward_row(gcp.var_store(), worker);
     }
+    if cfg.unseen_inputs == UnseenInputs::AsFloor {
+        unseen_planes_as_floor(worker, &gcp.trained_kinds());
+    }
     if let Some(vs) = manager {
         let m = copy_from(gcp.var_store(), vs, &["encoder"]);
+        if cfg.unseen_inputs == UnseenInputs::AsFloor {
+            unseen_planes_as_floor(vs, &gcp.trained_kinds());
+        }
         report
             .copied
             .extend(m.copied.into_iter().map(|n| format!("manager/{n}")));
@@ -230,5 +258,94 @@ mod tests {
             d["core.weight_ih_l0"].equal(&before),
             "the Manager's core is its own"
         );
+    }
+
+    /// A Wide-then-Narrow Door-Key Worker initialised from a `π_g` of the
+    /// plain small maze (floor, walls, exit): both goal planes start as
+    /// `π_g`'s goal plane, the planes of the kinds `π_g` never saw (ball,
+    /// key, doors, lava) as its floor plane, the carried-key plane at zero;
+    /// so the Worker's first layer sees the Door-Key maze as `π_g` sees its
+    /// structure. With the old settings the `g_n` plane and the unseen
+    /// planes keep draws of their own.
+    #[test]
+    fn a_door_key_worker_starts_from_pi_g_on_the_structure() {
+        use crate::a2c::input::{CellInput, GoalMarks, NO_GOAL};
+        use crate::batch_env::ObsView;
+        use crate::gcp::{GcpConfig, GoalConditionedPolicy};
+        use shm_schemas::EnvMeta;
+        use sim::{Maze, Object};
+
+        let plain = Maze::Small.layout(false);
+        let dk = Maze::Small.layout(true);
+        let gcfg = GcpConfig::default();
+        let mut gcp = GoalConditionedPolicy::new(&gcfg, &dk, 1, 3, 7).expect("π_g");
+        gcp.set_trained_on(&plain);
+        let trained = gcp.trained_kinds();
+        assert!(trained[Object::Exit as usize] && !trained[Object::DoorLocked as usize]);
+        assert!(!trained[Object::Key as usize] && !trained[Object::Ball as usize]);
+        let cfg = AgentConfig {
+            init_from_gcp: true,
+            conv_channels: gcfg.conv_channels,
+            hidden: gcfg.hidden,
+            ..AgentConfig::default()
+        };
+        let worker_cfg = ActorCriticConfig {
+            num_actions: 5,
+            goal_planes: 2,
+            ..gcfg.network(3)
+        };
+        let worker = |cfg: &AgentConfig| {
+            let vs = nn::VarStore::new(Device::Cpu);
+            let net = crate::seeding::init_seeded(11, || {
+                ActorCritic::new(&vs.root(), &worker_cfg, dk.width, dk.height)
+            });
+            from_pi_g(&gcp, cfg, &vs, None).expect("init");
+            (vs, net)
+        };
+        let (vs, net) = worker(&cfg);
+        let (w, s) = (&vs.variables()[CONV1], &gcp.var_store().variables()[CONV1]);
+        let plane = |t: &Tensor, k: usize| t.narrow(1, k as i64, 1);
+        assert!(plane(w, GOAL_CHANNEL + 1).equal(&plane(s, GOAL_CHANNEL)), "g_n plane");
+        for kind in [Object::Ball, Object::Key, Object::DoorLocked, Object::Lava] {
+            assert!(plane(w, kind as usize).equal(&plane(s, Object::Floor as usize)), "{kind:?}");
+        }
+        assert!(plane(w, Object::Exit as usize).equal(&plane(s, Object::Exit as usize)));
+        assert_eq!(plane(w, KEY_CHANNEL).abs().sum(tch::Kind::Float).double_value(&[]), 0.0);
+
+        // In front of the locked door with the key in hand, `g_n` on the
+        // door (`g_w` unmarked): the Worker's policy is π_g's on the
+        // structure (door as floor, hands empty) — the first three
+        // actions' logits agree.
+        let at = |x, y| dk.cell_index(x, y) as u32;
+        let door = at(6, 9);
+        let mut meta = [EnvMeta::EMPTY];
+        meta[0].x = 5;
+        meta[0].y = 9;
+        meta[0].dir = 0;
+        let logits = |cells: &[u8], meta: &[EnvMeta], goals: &[u32], planes: usize, net: &ActorCritic| {
+            let view = ObsView { seq: 0, cells, final_cells: &[], meta, width: dk.width, height: dk.height };
+            let mut input = CellInput::new(dk.width, dk.height, planes);
+            input.push_obs(&view, Some(GoalMarks { cells: goals, per_env: planes }));
+            tch::no_grad(|| net.step(&input, &net.zero_state(1))).logits.narrow(1, 0, 3)
+        };
+        let mut with_key = meta;
+        with_key[0].carrying = Object::Key as u8;
+        let structure: Vec<u8> = dk.structural().cells.iter().map(|&c| {
+            if c == Object::DoorOpen as u8 { Object::Floor as u8 } else { c }
+        }).collect();
+        let worker_view = logits(&dk.cells, &with_key, &[NO_GOAL, door], 2, &net);
+        let pi_g_view = logits(&structure, &meta, &[door], 1, gcp.network());
+        assert!(worker_view.allclose(&pi_g_view, 1e-5, 1e-5, false), "{worker_view} vs {pi_g_view}");
+
+        // The settings of before: the carried key moves the logits.
+        let old = AgentConfig {
+            unseen_inputs: UnseenInputs::Copied,
+            narrow_plane_init: NarrowPlaneInit::Fresh,
+            ..cfg
+        };
+        let (vs, net) = worker(&old);
+        assert!(!plane(&vs.variables()[CONV1], GOAL_CHANNEL + 1).equal(&plane(s, GOAL_CHANNEL)));
+        let old_view = logits(&dk.cells, &with_key, &[NO_GOAL, door], 2, &net);
+        assert!(!old_view.allclose(&pi_g_view, 1e-3, 1e-3, false));
     }
 }

@@ -207,6 +207,11 @@ pub fn load_gcp(dir: &Path, layout: &Layout) -> anyhow::Result<GoalConditionedPo
     .with_context(|| format!("{} is not a π_g config", cfg_path.display()))?;
     let mut gcp = GoalConditionedPolicy::new(&cfg, layout, 1, Task::MultiGoal.num_actions(), 0)?;
     gcp.load(dir.join(GCP_WEIGHTS_FILE))?;
+    // The maze discovery trained `π_g` on is its world graph's.
+    let graph_path = dir.join(GRAPH_FILE);
+    let discovered = planner::WorldGraph::load(&graph_path)
+        .with_context(|| format!("cannot load the world graph {}", graph_path.display()))?;
+    gcp.set_trained_on(discovered.layout());
     Ok(gcp)
 }
 
