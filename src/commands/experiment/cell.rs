@@ -53,6 +53,11 @@ pub(super) enum Phase {
 }
 
 impl CellState {
+    /// The state file of `job`, if it has a readable one.
+    pub fn read(plan: &Plan, job: &Job) -> Option<CellState> {
+        serde_json::from_slice(&std::fs::read(plan.cell_state_path(job)).ok()?).ok()
+    }
+
     fn save(&self, plan: &Plan, job: &Job) -> anyhow::Result<()> {
         let path = plan.cell_state_path(job);
         if let Some(d) = path.parent() {
@@ -64,7 +69,7 @@ impl CellState {
 }
 
 /// This machine's host name.
-fn this_host() -> String {
+pub(super) fn this_host() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
         .map(|s| s.trim().to_string())
         .unwrap_or_default()

@@ -9,10 +9,12 @@
 //! Each run is a *cell* with a fixed index into the grid ([`cells`]), and
 //! one code path runs a cell: `experiment GRID --cell INDEX` ([`cell`])
 //! starts its `discover` or `train` with the log in `<work>/logs/` and
-//! writes its summary under `results/` ([`crate::results`]). The local
-//! runner starts those cell processes, as many side by side as asked
-//! ([`local`]). Stopped and started again, it skips the cells that have a
-//! summary and resumes the others from their checkpoints.
+//! writes its summary under `results/` ([`crate::results`]). Two runners
+//! start those cell processes: this machine, as many side by side as asked
+//! ([`local`]), or a SLURM cluster, as job arrays whose task ids are the
+//! cell indices ([`slurm`]). Stopped and started again, either skips the
+//! cells that have a summary and resumes the others from their
+//! checkpoints; `--status` tells where each cell stands ([`status`]).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -30,9 +32,12 @@ mod cells;
 mod grid;
 mod local;
 mod reproduce;
+mod slurm;
+mod status;
 
 pub use self::grid::Grid;
 use self::grid::train_args;
+pub use self::slurm::SbatchArgs;
 use crate::results::{
     CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, build_commit,
     discover_path, read_run, run_path,
@@ -44,7 +49,9 @@ pub struct ExperimentArgs {
     /// The grid file (see `experiments/`).
     #[arg(required_unless_present = "reproduce")]
     pub grid: Option<PathBuf>,
-    /// Runs side by side [default: the machine's cores].
+    /// At most this many runs at once: side by side on this machine
+    /// [default: its cores], or with --slurm the array tasks running at
+    /// once (sbatch --array=...%N) [default: no limit].
     #[arg(long)]
     pub jobs: Option<usize>,
     /// libtorch threads of each run.
@@ -53,8 +60,8 @@ pub struct ExperimentArgs {
     /// Where the summaries go (committed to the repository).
     #[arg(long, default_value = "results")]
     pub results: PathBuf,
-    /// Working directory of the runs (checkpoints, logs, discovery runs)
-    /// [default: runs/experiments/<grid name>].
+    /// Working directory of the runs (checkpoints, logs, discovery runs,
+    /// SLURM scripts and output) [default: runs/experiments/<grid name>].
     #[arg(long)]
     pub work: Option<PathBuf>,
     /// Only these mazes (repeatable).
@@ -69,17 +76,33 @@ pub struct ExperimentArgs {
     /// Only these training seeds (repeatable).
     #[arg(long = "seed")]
     pub seeds: Vec<u64>,
-    /// List the runs and what is left, and exit.
+    /// List the runs and what is left (with --slurm: print the job scripts
+    /// and the sbatch command lines), and exit.
     #[arg(long)]
     pub dry_run: bool,
     /// Only the world graph discoveries the selected runs need, no
     /// training: each summary goes to `<results>/<maze>/discover/`.
     #[arg(long)]
     pub discoveries_only: bool,
+    /// Submit the grid to SLURM instead of running it here: the
+    /// discoveries as one job array, the training runs as another that
+    /// starts after it (--dependency=afterok), each array task one cell.
+    /// Submitted again, it skips the cells that are done, queued or
+    /// running and resumes the others.
+    #[arg(long, conflicts_with = "status")]
+    pub slurm: bool,
+    /// Show how many cells are done, queued or running (with their SLURM
+    /// job ids or local pids), failed (with their logs) and left, whichever
+    /// runner ran them, and exit.
+    #[arg(long)]
+    pub status: bool,
+    /// SLURM settings of --slurm.
+    #[command(flatten)]
+    pub sbatch: SbatchArgs,
     /// Run cell INDEX of the grid (an index into its runs, discoveries
     /// first) to its end and record its summary: what the local runner's
-    /// child processes run.
-    #[arg(long, value_name = "INDEX", hide = true, conflicts_with = "dry_run")]
+    /// child processes and each SLURM array task run.
+    #[arg(long, value_name = "INDEX", hide = true, conflicts_with_all = ["slurm", "status", "dry_run"])]
     pub cell: Option<usize>,
     /// With --cell: the digest of the grid file its runner read; a grid
     /// file changed since (its cell indices may have moved) is refused.
@@ -137,7 +160,8 @@ struct Plan {
     work: PathBuf,
     results: PathBuf,
     threads: usize,
-    /// Runs of the grid at once (a summary records it).
+    /// Runs of the grid at once (a summary records it): side by side here,
+    /// or the SLURM array's limit.
     jobs: usize,
     commit: String,
 }
@@ -214,8 +238,8 @@ impl Plan {
     }
 
     /// The arguments of `worldgraph experiment` that run one cell of this
-    /// plan, all but the cell index: the local runner starts its children
-    /// with them.
+    /// plan, all but the cell index: the local runner's children and the
+    /// SLURM job scripts start cells with them.
     fn cell_args(&self, jobs: usize) -> Vec<std::ffi::OsString> {
         let mut v: Vec<std::ffi::OsString> =
             vec!["experiment".into(), self.grid_path.clone().into()];
@@ -453,6 +477,12 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
         return cell::run(&plan, index, a.grid_digest.as_deref());
     }
     let cells = cells::Cells::load(&plan, &a)?;
+    if a.status {
+        return status::show(&plan, &cells);
+    }
+    if a.slurm {
+        return slurm::submit(&plan, &cells, &a.sbatch, a.jobs, a.dry_run);
+    }
     local::run(&plan, &cells, a.dry_run)
 }
 
