@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-fn worldgraph(dir: &Path, args: &[&str]) -> Output {
+pub(crate) fn worldgraph(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_worldgraph"))
         .args(args)
         .current_dir(dir)
@@ -17,7 +17,7 @@ fn worldgraph(dir: &Path, args: &[&str]) -> Output {
         .expect("run worldgraph")
 }
 
-fn ok(out: &Output) -> (String, String) {
+pub(crate) fn ok(out: &Output) -> (String, String) {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(
         out.status.success(),
@@ -27,7 +27,7 @@ fn ok(out: &Output) -> (String, String) {
     (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
 }
 
-fn refused(out: &Output) -> String {
+pub(crate) fn refused(out: &Output) -> String {
     assert!(!out.status.success(), "expected a refusal");
     String::from_utf8_lossy(&out.stderr).into_owned()
 }

@@ -17,33 +17,15 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn worldgraph(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_worldgraph"))
-        .args(args)
-        .current_dir(dir)
-        .env("WORLDGRAPH_TORCH_THREADS", "1")
-        .output()
-        .expect("run worldgraph")
-}
+use crate::experiment::{ok, refused, worldgraph};
 
-fn ok(out: &Output) -> (String, String) {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(
-        out.status.success(),
-        "status {:?}\nstdout: {}\nstderr: {stderr}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout)
-    );
-    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
-}
-
-fn refused(out: &Output) -> String {
-    assert!(
-        !out.status.success(),
-        "expected a refusal; stdout: {}",
-        String::from_utf8_lossy(&out.stdout)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
+/// `experiment grid.toml` with `args`, its summaries in `results` and
+/// its runs in `work`.
+fn on_grid<'a>(args: &[&'a str], results: &'a str, work: &'a str) -> Vec<&'a str> {
+    let mut v = vec!["experiment", "grid.toml"];
+    v.extend_from_slice(args);
+    v.extend(["--results", results, "--work", work]);
+    v
 }
 
 /// A CI-sized grid on the small maze: `configs` × `seeds`, each run
@@ -125,6 +107,19 @@ fn assert_same_summaries(a: &Path, b: &Path) -> usize {
         );
     }
     left.len()
+}
+
+#[test]
+fn the_summary_comparison_masks_the_measured_times_and_nothing_else() {
+    let a = b"{\n  \"test_score\": 0.5,\n  \"wall_seconds\": 1.25,\n  \"train_steps_per_sec\": 900.0\n}";
+    let b =
+        b"{\n  \"test_score\": 0.5,\n  \"wall_seconds\": 7.5,\n  \"train_steps_per_sec\": 12.0\n}";
+    let c = b"{\n  \"test_score\": 0.50000001,\n  \"wall_seconds\": 1.25,\n  \"train_steps_per_sec\": 900.0\n}";
+    let (ma, na) = without_timing(a);
+    assert_eq!(na, 2);
+    assert_eq!(ma, without_timing(b).0);
+    assert_ne!(ma, without_timing(c).0);
+    assert!(ma.contains("\"wall_seconds\": T,\n"), "{ma}");
 }
 
 /// A `bin/` with fake `sbatch` and `squeue`: sbatch records its arguments
@@ -246,32 +241,13 @@ fn a_job_script_run_as_an_array_task_writes_the_local_runners_summary() {
     std::fs::write(d.join("grid.toml"), grid("script", "0", "\"a2c\"", 11520)).unwrap();
     ok(&worldgraph(
         d,
-        &[
-            "experiment",
-            "grid.toml",
-            "--jobs",
-            "1",
-            "--results",
-            "local",
-            "--work",
-            "local-work",
-        ],
+        &on_grid(&["--jobs", "1"], "local", "local-work"),
     ));
     let path = format!("{}:/usr/bin:/bin", fake_slurm(d, false).display());
     let (_, err) = ok(&with_path(
         d,
         path.as_ref(),
-        &[
-            "experiment",
-            "grid.toml",
-            "--slurm",
-            "--jobs",
-            "1",
-            "--results",
-            "slurm",
-            "--work",
-            "slurm-work",
-        ],
+        &on_grid(&["--slurm", "--jobs", "1"], "slurm", "slurm-work"),
     ));
     assert!(
         err.contains("submitted 1 train cells as SLURM job 42 (array 0, 1 at once)"),
@@ -309,15 +285,7 @@ fn a_job_script_run_as_an_array_task_writes_the_local_runners_summary() {
         let (out, _) = ok(&with_path(
             d,
             path.as_ref(),
-            &[
-                "experiment",
-                "grid.toml",
-                "--status",
-                "--results",
-                results,
-                "--work",
-                work,
-            ],
+            &on_grid(&["--status"], results, work),
         ));
         assert!(
             out.contains("done 1, queued 0, running 0, failed 0, left 0"),
@@ -328,15 +296,7 @@ fn a_job_script_run_as_an_array_task_writes_the_local_runners_summary() {
     let (_, err) = ok(&with_path(
         d,
         path.as_ref(),
-        &[
-            "experiment",
-            "grid.toml",
-            "--slurm",
-            "--results",
-            "slurm",
-            "--work",
-            "slurm-work",
-        ],
+        &on_grid(&["--slurm"], "slurm", "slurm-work"),
     ));
     assert!(err.contains("nothing to submit"), "{err}");
 }
@@ -468,18 +428,7 @@ fn squeue() -> String {
 
 /// `--status` of the grid in `d` (results `results`, work `work`).
 fn status(d: &Path, results: &str, work: &str) -> Output {
-    worldgraph(
-        d,
-        &[
-            "experiment",
-            "grid.toml",
-            "--status",
-            "--results",
-            results,
-            "--work",
-            work,
-        ],
-    )
+    worldgraph(d, &on_grid(&["--status"], results, work))
 }
 
 /// Prints each new `squeue` picture.
@@ -507,15 +456,19 @@ impl QueueWatch {
     }
 }
 
-/// Waits until no cell of the grid is queued or running (at most
-/// `limit`), printing each new `squeue` picture on the way.
+/// Waits until no cell of the grid is queued or running and SLURM's queue
+/// is empty (a cell is done once its summary is written, a moment before
+/// its array task has ended), at most `limit`; prints each new `squeue`
+/// picture on the way.
 fn wait_for_grid(d: &Path, results: &str, work: &str, limit: Duration) -> String {
     let t0 = Instant::now();
     let mut watch = QueueWatch::default();
     loop {
         watch.look(Duration::ZERO);
         let (out, _) = ok(&status(d, results, work));
-        if out.contains("queued 0, running 0,") {
+        let queue = Command::new("squeue").arg("--noheader").output().unwrap();
+        if out.contains("queued 0, running 0,") && queue.status.success() && queue.stdout.is_empty()
+        {
             return out;
         }
         assert!(
@@ -526,10 +479,13 @@ fn wait_for_grid(d: &Path, results: &str, work: &str, limit: Duration) -> String
     }
 }
 
-/// The completion records of `jobs` in the cluster's job completion log.
-fn completions(jobs: &[String]) -> Vec<String> {
+/// Prints the job completion log's records of the grid's array tasks and
+/// asserts how many ended COMPLETED and how many CANCELLED.
+fn assert_job_ends(d: &Path, work: &str, completed: usize, cancelled: usize) {
+    let jobs = submitted_jobs(d, work);
     let text = std::fs::read_to_string(cluster().join("jobcomp.txt")).unwrap_or_default();
-    text.lines()
+    let records: Vec<String> = text
+        .lines()
         .filter(|l| jobs.iter().any(|j| l.contains(&format!("ArrayJobId={j} "))))
         .map(|l| {
             // The fields that tell what ran.
@@ -551,7 +507,19 @@ fn completions(jobs: &[String]) -> Vec<String> {
                 .collect::<Vec<_>>()
                 .join(" ")
         })
-        .collect()
+        .collect();
+    eprintln!(
+        "job completion log of array jobs {jobs:?}:\n{}",
+        records.join("\n")
+    );
+    let count = |state: &str| {
+        records
+            .iter()
+            .filter(|l| l.contains(&format!("JobState={state} ")))
+            .count()
+    };
+    assert_eq!(count("COMPLETED"), completed, "{records:#?}");
+    assert_eq!(count("CANCELLED"), cancelled, "{records:#?}");
 }
 
 /// The array job ids of a grid's submissions.
@@ -582,33 +550,14 @@ fn slurm_runs_the_grid_as_the_local_runner_does_and_resumes_a_cancelled_cell() {
     .unwrap();
     ok(&worldgraph(
         d,
-        &[
-            "experiment",
-            "grid.toml",
-            "--jobs",
-            "2",
-            "--results",
-            "local",
-            "--work",
-            "local-work",
-        ],
+        &on_grid(&["--jobs", "2"], "local", "local-work"),
     ));
     eprintln!("local runner: {:.0} s", t0.elapsed().as_secs_f64());
 
     // A script sbatch rejects: a clear error, nothing recorded.
     let err = refused(&worldgraph(
         d,
-        &[
-            "experiment",
-            "grid.toml",
-            "--slurm",
-            "--partition",
-            "nope",
-            "--results",
-            "slurm",
-            "--work",
-            "slurm-work",
-        ],
+        &on_grid(&["--slurm", "--partition", "nope"], "slurm", "slurm-work"),
     ));
     assert!(
         err.contains("sbatch refused") && err.contains("invalid partition"),
@@ -617,21 +566,19 @@ fn slurm_runs_the_grid_as_the_local_runner_does_and_resumes_a_cancelled_cell() {
     assert!(!d.join("slurm-work/slurm/submissions.jsonl").exists());
 
     let t1 = Instant::now();
-    let submit = [
-        "experiment",
-        "grid.toml",
-        "--slurm",
-        "--jobs",
-        "2",
-        "--partition",
-        "main",
-        "--time",
-        "20",
-        "--results",
+    let submit = on_grid(
+        &[
+            "--slurm",
+            "--jobs",
+            "2",
+            "--partition",
+            "main",
+            "--time",
+            "20",
+        ],
         "slurm",
-        "--work",
         "slurm-work",
-    ];
+    );
     let (_, err) = ok(&worldgraph(d, &submit));
     eprintln!("{err}");
     assert!(
@@ -735,23 +682,7 @@ fn slurm_runs_the_grid_as_the_local_runner_does_and_resumes_a_cancelled_cell() {
     eprintln!(
         "{n} summaries equal the local runner's byte for byte but for wall_seconds and train_steps_per_sec"
     );
-    let jobs = submitted_jobs(d, "slurm-work");
-    let done = completions(&jobs);
-    eprintln!("job completion log of jobs {jobs:?}:\n{}", done.join("\n"));
-    assert_eq!(
-        done.iter()
-            .filter(|l| l.contains("JobState=COMPLETED"))
-            .count(),
-        6,
-        "{done:#?}"
-    );
-    assert_eq!(
-        done.iter()
-            .filter(|l| l.contains("JobState=CANCELLED"))
-            .count(),
-        1,
-        "{done:#?}"
-    );
+    assert_job_ends(d, "slurm-work", 6, 1);
     eprintln!("on SLURM: {:.0} s", t1.elapsed().as_secs_f64());
 }
 
@@ -766,17 +697,7 @@ fn slurmctld_stopped_mid_grid_and_started_again_loses_nothing() {
         grid("ctld", "0, 1, 2", "\"a2c\"", 38400),
     )
     .unwrap();
-    let submit = [
-        "experiment",
-        "grid.toml",
-        "--slurm",
-        "--jobs",
-        "1",
-        "--results",
-        "slurm",
-        "--work",
-        "slurm-work",
-    ];
+    let submit = on_grid(&["--slurm", "--jobs", "1"], "slurm", "slurm-work");
     ok(&worldgraph(d, &submit));
     let t0 = Instant::now();
     loop {
@@ -852,14 +773,5 @@ fn slurmctld_stopped_mid_grid_and_started_again_loses_nothing() {
         out.contains("done 3, queued 0, running 0, failed 0, left 0"),
         "{out}"
     );
-    let jobs = submitted_jobs(d, "slurm-work");
-    let done = completions(&jobs);
-    eprintln!("job completion log:\n{}", done.join("\n"));
-    assert_eq!(
-        done.iter()
-            .filter(|l| l.contains("JobState=COMPLETED"))
-            .count(),
-        3,
-        "{done:#?}"
-    );
+    assert_job_ends(d, "slurm-work", 3, 0);
 }
