@@ -2,7 +2,7 @@
 # PyPI, crates from crates.io) on first use and cache it.
 CARGO ?= cargo
 
-.PHONY: demo test libtorch bench clean-shm python python-test bench-python torch-python bench-learner-python
+.PHONY: demo test test-slurm libtorch bench clean-shm python python-test bench-python torch-python bench-learner-python
 
 # The Python package (python/): a project-owned virtual environment with
 # pinned packages from PyPI, the extension built into it by maturin.
@@ -29,6 +29,14 @@ test: libtorch
 	    echo "$$crate depends on iceoryx2: shm_schemas' ipc feature leaked into it" >&2; exit 1; fi; \
 	done
 	$(MAKE) --no-print-directory python-test WORLDGRAPH_REQUIRE_RUST=1
+
+# `experiment --slurm` on a real SLURM: a one-node cluster on this machine
+# (Debian's slurm-wlm and munge, installed if missing; needs root), a tiny
+# grid submitted as job arrays and checked against the local runner, a
+# cancelled cell resumed, slurmctld stopped and started mid-grid; the cluster
+# is shut down afterwards (scripts/test-slurm.sh).
+test-slurm: libtorch
+	CARGO="$(CARGO)" bash scripts/test-slurm.sh
 
 # The venv is (re)made when the pins change; nothing is installed by hand.
 $(VENV)/.requirements: python/requirements.txt

@@ -77,7 +77,8 @@ enum Command {
     /// Score a `train` run's best checkpoint on any range of test seeds.
     Evaluate(commands::train::EvaluateArgs),
     /// The paper's ablation study: a grid of (maze, task, agent, seed) runs,
-    /// side by side, resumable, each summary written under `results/`.
+    /// side by side here or as SLURM job arrays (--slurm), resumable, each
+    /// summary written under `results/`.
     Experiment(commands::experiment::ExperimentArgs),
     /// Render `results/` as the paper's Tables 1 and 2 with time to score
     /// and the Figure 4 curves (`docs/results.md`).

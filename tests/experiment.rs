@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-fn worldgraph(dir: &Path, args: &[&str]) -> Output {
+pub(crate) fn worldgraph(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_worldgraph"))
         .args(args)
         .current_dir(dir)
@@ -17,7 +17,7 @@ fn worldgraph(dir: &Path, args: &[&str]) -> Output {
         .expect("run worldgraph")
 }
 
-fn ok(out: &Output) -> (String, String) {
+pub(crate) fn ok(out: &Output) -> (String, String) {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(
         out.status.success(),
@@ -27,7 +27,7 @@ fn ok(out: &Output) -> (String, String) {
     (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
 }
 
-fn refused(out: &Output) -> String {
+pub(crate) fn refused(out: &Output) -> String {
     assert!(!out.status.success(), "expected a refusal");
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -377,6 +377,15 @@ fn a_grid_killed_with_sigkill_takes_its_runs_with_it() {
             std::fs::read_to_string(d.join("grid.log")).unwrap_or_default()
         );
     }
+    // --status names the run's cell process, the grid's child.
+    let (out, _) = ok(&worldgraph(d, &["experiment", "long.toml", "--status"]));
+    assert!(
+        out.contains(&format!(
+            "running  small/multigoal/a2c/seed-0  pid {} on ",
+            runs.pids[0]
+        )),
+        "{out}"
+    );
     parent.kill().unwrap();
     parent.wait().unwrap();
     let t0 = Instant::now();
@@ -385,11 +394,18 @@ fn a_grid_killed_with_sigkill_takes_its_runs_with_it() {
     }
     assert!(
         runs.pids.iter().all(|&p| !alive(p)),
-        "the train run outlived its grid's SIGKILL"
+        "the run's cell process outlived its grid's SIGKILL"
     );
     // Its run directory is free: a rerun of the grid would take it.
     let lock = std::fs::File::open(run.join("lock")).unwrap();
     assert!(lock.try_lock().is_ok(), "the run's lock is still held");
+    // The cell stopped its run and said so.
+    let (out, _) = ok(&worldgraph(d, &["experiment", "long.toml", "--status"]));
+    assert!(
+        out.contains("failed 1, left 0")
+            && out.contains("failed   small/multigoal/a2c/seed-0  stopped by a signal"),
+        "{out}"
+    );
 }
 
 #[test]

@@ -10,6 +10,8 @@ mod pipeline;
 mod train;
 // The paper's experiments: a grid's summaries, restart, reproduce, tables.
 mod experiment;
+// The grid on SLURM: job scripts, cells, --status; a real cluster when asked.
+mod slurm;
 // Property tests over layouts, discovery configs and role arguments.
 mod fuzz;
 // The docs stand alone: relative links resolve inside the repository.

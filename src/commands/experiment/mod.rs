@@ -5,20 +5,21 @@
 //! test seeds; see `train`).
 //!
 //! The grid discovers the world graphs its configurations need (`V_p` and
-//! `V_rand` come from one `discover` run per maze and seed) and reuses them;
-//! it runs as many runs side by side as asked (one libtorch thread each by
-//! default), each a `worldgraph train` child process with its log in
-//! `<work>/logs/`. Every finished run writes its summary under `results/`
-//! ([`crate::results`]); killed and restarted, the grid skips the runs that
-//! have one and resumes the others from their checkpoints.
+//! `V_rand` come from one `discover` run per maze and seed) and reuses them.
+//! Each run is a *cell* with a fixed index into the grid ([`cells`]), and
+//! one code path runs a cell: `experiment GRID --cell INDEX` ([`cell`])
+//! starts its `discover` or `train` with the log in `<work>/logs/` and
+//! writes its summary under `results/` ([`crate::results`]). Two runners
+//! start those cell processes: this machine, as many side by side as asked
+//! ([`local`]), or a SLURM cluster, as job arrays whose task ids are the
+//! cell indices ([`slurm`]). Stopped and started again, either skips the
+//! cells that have a summary and resumes the others from their
+//! checkpoints; `--status` tells where each cell stands ([`status`]).
 
-use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::Args;
 use sim::render::write_atomic;
 use sim::{Maze, Task};
@@ -26,11 +27,17 @@ use sim::{Maze, Task};
 use learner::a2c::rollout::GradPath;
 use learner::run::config::TrainConfig;
 use learner::run::protocol::TestSummary;
+mod cell;
+mod cells;
 mod grid;
+mod local;
 mod reproduce;
+mod slurm;
+mod status;
 
 pub use self::grid::Grid;
-use self::grid::{Group, config_named, train_args};
+use self::grid::train_args;
+pub use self::slurm::SbatchArgs;
 use crate::results::{
     CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, build_commit,
     discover_path, read_run, run_path,
@@ -42,7 +49,9 @@ pub struct ExperimentArgs {
     /// The grid file (see `experiments/`).
     #[arg(required_unless_present = "reproduce")]
     pub grid: Option<PathBuf>,
-    /// Runs side by side [default: the machine's cores].
+    /// At most this many runs at once: side by side on this machine
+    /// [default: its cores], or with --slurm the array tasks running at
+    /// once (sbatch --array=...%N) [default: no limit].
     #[arg(long)]
     pub jobs: Option<usize>,
     /// libtorch threads of each run.
@@ -51,8 +60,8 @@ pub struct ExperimentArgs {
     /// Where the summaries go (committed to the repository).
     #[arg(long, default_value = "results")]
     pub results: PathBuf,
-    /// Working directory of the runs (checkpoints, logs, discovery runs)
-    /// [default: runs/experiments/<grid name>].
+    /// Working directory of the runs (checkpoints, logs, discovery runs,
+    /// SLURM scripts and output) [default: runs/experiments/<grid name>].
     #[arg(long)]
     pub work: Option<PathBuf>,
     /// Only these mazes (repeatable).
@@ -67,13 +76,38 @@ pub struct ExperimentArgs {
     /// Only these training seeds (repeatable).
     #[arg(long = "seed")]
     pub seeds: Vec<u64>,
-    /// List the runs and what is left, and exit.
+    /// List the runs and what is left (with --slurm: print the job scripts
+    /// and the sbatch command lines), and exit.
     #[arg(long)]
     pub dry_run: bool,
     /// Only the world graph discoveries the selected runs need, no
     /// training: each summary goes to `<results>/<maze>/discover/`.
     #[arg(long)]
     pub discoveries_only: bool,
+    /// Submit the grid to SLURM instead of running it here: the
+    /// discoveries as one job array, the training runs as another that
+    /// starts after it (--dependency=afterok), each array task one cell.
+    /// Submitted again, it skips the cells that are done, queued or
+    /// running and resumes the others.
+    #[arg(long, conflicts_with = "status")]
+    pub slurm: bool,
+    /// Show how many cells are done, queued or running (with their SLURM
+    /// job ids or local pids), failed (with their logs) and left, whichever
+    /// runner ran them, and exit.
+    #[arg(long)]
+    pub status: bool,
+    /// SLURM settings of --slurm.
+    #[command(flatten)]
+    pub sbatch: SbatchArgs,
+    /// Run cell INDEX of the grid (an index into its runs, discoveries
+    /// first) to its end and record its summary: what the local runner's
+    /// child processes and each SLURM array task run.
+    #[arg(long, value_name = "INDEX", hide = true, conflicts_with_all = ["slurm", "status", "dry_run"])]
+    pub cell: Option<usize>,
+    /// With --cell: the digest of the grid file its runner read; a grid
+    /// file changed since (its cell indices may have moved) is refused.
+    #[arg(long, value_name = "HEX", hide = true, requires = "cell")]
+    pub grid_digest: Option<String>,
     /// Rerun the run a summary records (discovery included) in a scratch
     /// directory and check that it gives the same test score; exits
     /// non-zero if not.
@@ -103,17 +137,59 @@ enum Job {
     },
 }
 
+impl Job {
+    /// The command that runs it: `discover` or `train`.
+    fn command(&self) -> &'static str {
+        match self {
+            Job::Discover { .. } => "discover",
+            Job::Train { .. } => "train",
+        }
+    }
+}
+
+/// A grid and where its runs work and write.
 struct Plan {
     grid: Grid,
+    /// The grid file as given on the command line: cell processes read it
+    /// from the same directory, and summaries name it.
+    grid_path: PathBuf,
+    /// `grid_path` as summaries name it.
     grid_label: String,
+    /// [`digest`] of the grid file's bytes.
+    grid_digest: String,
     work: PathBuf,
     results: PathBuf,
     threads: usize,
+    /// Runs of the grid at once (a summary records it): side by side here,
+    /// or the SLURM array's limit.
     jobs: usize,
     commit: String,
 }
 
 impl Plan {
+    /// The plan of `worldgraph experiment GRID` with the options in `a`.
+    fn new(a: &ExperimentArgs, grid_path: &Path) -> anyhow::Result<Plan> {
+        let bytes = std::fs::read(grid_path)
+            .with_context(|| format!("cannot read {}", grid_path.display()))?;
+        let grid = Grid::read(grid_path)?;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = a.threads.max(1);
+        Ok(Plan {
+            work: a
+                .work
+                .clone()
+                .unwrap_or_else(|| PathBuf::from("runs/experiments").join(&grid.name)),
+            results: a.results.clone(),
+            threads,
+            jobs: a.jobs.unwrap_or((cores / threads).max(1)).max(1),
+            commit: build_commit(),
+            grid_path: grid_path.to_path_buf(),
+            grid_label: grid_path.display().to_string(),
+            grid_digest: digest(&bytes),
+            grid,
+        })
+    }
+
     fn discover_dir(&self, spec: &DiscoverSpec) -> PathBuf {
         self.work
             .join("discover")
@@ -141,11 +217,57 @@ impl Plan {
         }
     }
 
+    /// The label as a file name: `small_multigoal_a2c_seed-0`.
+    fn file_stem(job: &Job) -> String {
+        Self::label(job).replace(['/', ' '], "_")
+    }
+
+    /// The run's log: its cell's lines and the output of its `discover` or
+    /// `train`, every attempt appended.
     fn log_path(&self, job: &Job) -> PathBuf {
         self.work
             .join("logs")
-            .join(format!("{}.log", Self::label(job).replace(['/', ' '], "_")))
+            .join(format!("{}.log", Self::file_stem(job)))
     }
+
+    /// The state file of a cell that is running or failed ([`cell`]).
+    fn cell_state_path(&self, job: &Job) -> PathBuf {
+        self.work
+            .join("cells")
+            .join(format!("{}.json", Self::file_stem(job)))
+    }
+
+    /// The arguments of `worldgraph experiment` that run one cell of this
+    /// plan, all but the cell index: the local runner's children and the
+    /// SLURM job scripts start cells with them.
+    fn cell_args(&self, jobs: usize) -> Vec<std::ffi::OsString> {
+        let mut v: Vec<std::ffi::OsString> =
+            vec!["experiment".into(), self.grid_path.clone().into()];
+        v.extend([
+            "--results".into(),
+            self.results.clone().into(),
+            "--work".into(),
+            self.work.clone().into(),
+            "--threads".into(),
+            self.threads.to_string().into(),
+            "--jobs".into(),
+            jobs.to_string().into(),
+            "--grid-digest".into(),
+            self.grid_digest.clone().into(),
+        ]);
+        v
+    }
+}
+
+/// FNV-1a (64 bits) of `bytes` in hex: a grid file's digest, which tells a
+/// cell process that its grid is the one its runner indexed.
+fn digest(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
 }
 
 fn discover_command(plan: &Plan, spec: &DiscoverSpec) -> anyhow::Result<Command> {
@@ -344,403 +466,40 @@ fn write_result(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The grid's runs that match the filters: discoveries first, then the
-/// training runs cell by cell (all seeds of a cell together, so a stopped
-/// grid leaves whole cells).
-fn jobs(grid: &Grid, a: &ExperimentArgs) -> anyhow::Result<Vec<Job>> {
-    for c in &a.configs {
-        config_named(c)?;
-    }
-    let keep_maze = |m: Maze| a.mazes.is_empty() || a.mazes.contains(&m);
-    let keep_seed = |s: u64| a.seeds.is_empty() || a.seeds.contains(&s);
-    let mut discover: HashMap<(Maze, u64), usize> = HashMap::new();
-    let mut out = Vec::new();
-    let mut train = Vec::new();
-    for g in &grid.group {
-        let mazes: Vec<Maze> = if g.mazes.is_empty() {
-            grid.maze.iter().map(|m| m.name).collect()
-        } else {
-            g.mazes.clone()
-        };
-        for maze in mazes.into_iter().filter(|&m| keep_maze(m)) {
-            for &task in g
-                .tasks
-                .iter()
-                .filter(|t| a.tasks.is_empty() || a.tasks.contains(t))
-            {
-                for config in g
-                    .configs
-                    .iter()
-                    .filter(|c| a.configs.is_empty() || a.configs.contains(c))
-                {
-                    let needs_graph = config_named(config)?.needs_discovery(task);
-                    for &seed in grid.seeds.iter().filter(|&&s| keep_seed(s)) {
-                        let needs = needs_graph.then(|| {
-                            *discover.entry((maze, seed)).or_insert_with(|| {
-                                out.push(Job::Discover {
-                                    spec: DiscoverSpec {
-                                        maze: maze.name().to_string(),
-                                        seed,
-                                        rounds: grid.budget(maze).expect("checked").discover_rounds,
-                                    },
-                                });
-                                out.len() - 1
-                            })
-                        });
-                        train.push(Job::Train {
-                            maze,
-                            task,
-                            config: config.clone(),
-                            seed,
-                            needs,
-                        });
-                    }
-                }
-            }
-        }
-    }
-    if !a.discoveries_only {
-        out.extend(train);
-    }
-    Ok(out)
-}
-
-/// The filters given, in words: `--maze medium --seed 7`.
-fn filters(a: &ExperimentArgs) -> String {
-    let mut v: Vec<String> = Vec::new();
-    v.extend(a.mazes.iter().map(|m| format!("--maze {}", m.name())));
-    v.extend(a.tasks.iter().map(|t| format!("--task {}", t.name())));
-    v.extend(a.configs.iter().map(|c| format!("--config {c}")));
-    v.extend(a.seeds.iter().map(|s| format!("--seed {s}")));
-    if v.is_empty() {
-        "none".to_string()
-    } else {
-        v.join(" ")
-    }
-}
-
-/// Each filter value the grid has no run of (`--seed 9` in a grid of
-/// seeds 0 to 2).
-fn unmatched_filters(grid: &Grid, a: &ExperimentArgs) -> Vec<String> {
-    let mazes = |g: &Group| -> Vec<Maze> {
-        if g.mazes.is_empty() {
-            grid.maze.iter().map(|m| m.name).collect()
-        } else {
-            g.mazes.clone()
-        }
-    };
-    let mut out = Vec::new();
-    for m in &a.mazes {
-        if !grid.group.iter().any(|g| mazes(g).contains(m)) {
-            out.push(format!("--maze {}", m.name()));
-        }
-    }
-    for t in &a.tasks {
-        if !grid.group.iter().any(|g| g.tasks.contains(t)) {
-            out.push(format!("--task {}", t.name()));
-        }
-    }
-    for c in &a.configs {
-        if !grid.group.iter().any(|g| g.configs.contains(c)) {
-            out.push(format!("--config {c}"));
-        }
-    }
-    for s in &a.seeds {
-        if !grid.seeds.contains(s) {
-            out.push(format!("--seed {s}"));
-        }
-    }
-    out
-}
-
 /// Runs `worldgraph experiment`.
 pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(summary) = &a.reproduce {
         return reproduce::reproduce(summary, &a);
     }
     let grid_path = a.grid.clone().expect("clap: grid or --reproduce");
-    let grid = Grid::read(&grid_path)?;
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let plan = Plan {
-        work: a
-            .work
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("runs/experiments").join(&grid.name)),
-        results: a.results.clone(),
-        threads: a.threads.max(1),
-        jobs: a.jobs.unwrap_or((cores / a.threads.max(1)).max(1)).max(1),
-        commit: build_commit(),
-        grid_label: grid_path.display().to_string(),
-        grid,
-    };
-    let all = jobs(&plan.grid, &a)?;
-    for f in unmatched_filters(&plan.grid, &a) {
-        eprintln!("warning: {f} matches no run of {}", grid_path.display());
+    let plan = Plan::new(&a, &grid_path)?;
+    if let Some(index) = a.cell {
+        return cell::run(&plan, index, a.grid_digest.as_deref());
     }
-    if all.is_empty() {
-        eprintln!(
-            "warning: the filters ({}) select no run of {}",
-            filters(&a),
-            grid_path.display()
-        );
+    let cells = cells::Cells::load(&plan, &a)?;
+    if a.status {
+        return status::show(&plan, &cells);
     }
-    // What is already done: a summary under results/ (training), or a
-    // finished discovery in the working directory.
-    let mut finished = vec![false; all.len()];
-    for (i, j) in all.iter().enumerate() {
-        finished[i] = match j {
-            Job::Discover { spec } => discovery_done(&plan.discover_dir(spec), spec).is_some(),
-            Job::Train {
-                maze,
-                task,
-                config,
-                seed,
-                ..
-            } => {
-                let path = run_path(&plan.results, maze.name(), task.name(), config, *seed);
-                if path.exists() {
-                    // A cell never mixes budgets: a summary of another
-                    // budget or protocol is refused, not counted.
-                    let r = read_run(&path)?;
-                    let want = plan.grid.train_config(*maze);
-                    let got = &r.train_config;
-                    anyhow::ensure!(
-                        (
-                            got.env_steps,
-                            got.eval_every,
-                            got.validation_seeds,
-                            got.test_seeds
-                        ) == (
-                            want.env_steps,
-                            want.eval_every,
-                            want.validation_seeds,
-                            want.test_seeds
-                        ),
-                        "{} was run with env_steps {}, eval_every {}, {} validation and {} test seeds; \
-                         this grid asks for {}, {}, {} and {}: give the grid another --results directory",
-                        path.display(),
-                        got.env_steps,
-                        got.eval_every,
-                        got.validation_seeds,
-                        got.test_seeds,
-                        want.env_steps,
-                        want.eval_every,
-                        want.validation_seeds,
-                        want.test_seeds
-                    );
-                    true
-                } else {
-                    false
-                }
-            }
-        };
+    if a.slurm {
+        return slurm::submit(&plan, &cells, &a.sbatch, a.jobs, a.dry_run);
     }
-    // A discovery is needed only by training runs still to do (or for
-    // itself, with --discoveries-only).
-    let needed: Vec<bool> = (0..all.len())
-        .map(|i| match &all[i] {
-            Job::Discover { .. } if a.discoveries_only => true,
-            Job::Discover { .. } => all.iter().enumerate().any(|(k, j)| {
-                matches!(j, Job::Train { needs: Some(n), .. } if *n == i) && !finished[k]
-            }),
-            Job::Train { .. } => true,
-        })
-        .collect();
-    let trains = all
-        .iter()
-        .filter(|j| matches!(j, Job::Train { .. }))
-        .count();
-    let trains_done = all
-        .iter()
-        .zip(&finished)
-        .filter(|(j, f)| matches!(j, Job::Train { .. }) && **f)
-        .count();
-    let mut queue: VecDeque<usize> = (0..all.len())
-        .filter(|&i| !finished[i] && needed[i])
-        .collect();
-    eprintln!(
-        "experiment {}: {} training runs ({} done, {} to run), {} discoveries to run; {} side by side, {} libtorch thread(s) each; work in {}, results in {}",
-        plan.grid.name,
-        trains,
-        trains_done,
-        trains - trains_done,
-        queue
-            .iter()
-            .filter(|&&i| matches!(all[i], Job::Discover { .. }))
-            .count(),
-        plan.jobs,
-        plan.threads,
-        plan.work.display(),
-        plan.results.display()
-    );
-    if a.dry_run {
-        for &i in &queue {
-            println!("{}", Plan::label(&all[i]));
-        }
-        return Ok(std::process::ExitCode::SUCCESS);
-    }
-    // A discovery that finished after its grid was stopped, before its
-    // summary was written: written now.
-    for (i, j) in all.iter().enumerate() {
+    local::run(&plan, &cells, a.dry_run)
+}
+
+/// Records the discoveries that finished after their cell was stopped,
+/// before it wrote their summary.
+fn record_finished_discoveries(plan: &Plan, cells: &cells::Cells) -> anyhow::Result<()> {
+    for &i in &cells.selected {
+        let j = &cells.all[i];
         if let Job::Discover { spec } = j
-            && finished[i]
+            && cells.done[i]
             && !discover_path(&plan.results, &spec.maze, spec.seed).exists()
         {
-            record(&plan, j)?;
+            record(plan, j)?;
             eprintln!("recorded {} (it had finished)", Plan::label(j));
         }
     }
-
-    let stop = crate::shutdown::stop_flag_with_hangup()?;
-    let bar = crate::progress::bar(queue.len() as u64, "experiment");
-    let mut running: Vec<(usize, Child, Instant)> = Vec::new();
-    let mut failed: Vec<(usize, String)> = Vec::new();
-    let mut done_now = 0usize;
-    let is_failed = |failed: &Vec<(usize, String)>, i: usize| failed.iter().any(|(k, _)| *k == i);
-    loop {
-        if stop.load(Ordering::Relaxed) {
-            for (_, child, _) in &mut running {
-                let _ = nix::sys::signal::kill(
-                    nix::unistd::Pid::from_raw(child.id() as i32),
-                    nix::sys::signal::Signal::SIGTERM,
-                );
-            }
-            for (_, child, _) in &mut running {
-                let _ = child.wait();
-            }
-            bar.finish_and_clear();
-            bail!(
-                "stopped: {} runs finished this time; the rest resume from their checkpoints on the next start",
-                done_now
-            );
-        }
-        // Reap.
-        let mut k = 0;
-        while k < running.len() {
-            let (i, child, started) = &mut running[k];
-            match child.try_wait()? {
-                None => k += 1,
-                Some(status) => {
-                    let i = *i;
-                    let secs = started.elapsed().as_secs_f64();
-                    let job = &all[i];
-                    let outcome = if status.success() {
-                        record(&plan, job)
-                    } else {
-                        Err(anyhow::anyhow!(
-                            "{status}; the end of {}:\n{}",
-                            plan.log_path(job).display(),
-                            tail(&plan.log_path(job), 6)
-                        ))
-                    };
-                    match outcome {
-                        Ok(()) => {
-                            finished[i] = true;
-                            done_now += 1;
-                            crate::progress::note(
-                                &bar,
-                                &format!(
-                                    "done {} ({secs:.0} s){}",
-                                    Plan::label(job),
-                                    score_note(&plan, job)
-                                ),
-                            );
-                        }
-                        Err(e) => {
-                            crate::progress::note(
-                                &bar,
-                                &format!("FAILED {}: {e:#}", Plan::label(job)),
-                            );
-                            failed.push((i, format!("{e:#}")));
-                        }
-                    }
-                    bar.inc(1);
-                    running.swap_remove(k);
-                }
-            }
-        }
-        // Launch what is ready.
-        let mut k = 0;
-        while running.len() < plan.jobs && k < queue.len() {
-            let i = queue[k];
-            let ready = match &all[i] {
-                Job::Discover { .. } => Some(None),
-                Job::Train { needs: None, .. } => Some(None),
-                Job::Train { needs: Some(n), .. } if finished[*n] => {
-                    let Job::Discover { spec } = &all[*n] else {
-                        unreachable!("needs points at a discovery")
-                    };
-                    Some(Some(std::fs::canonicalize(plan.discover_dir(spec))?))
-                }
-                Job::Train { needs: Some(n), .. } if is_failed(&failed, *n) => {
-                    failed.push((
-                        i,
-                        format!("its discovery ({}) failed", Plan::label(&all[*n])),
-                    ));
-                    bar.inc(1);
-                    queue.remove(k);
-                    continue;
-                }
-                Job::Train { .. } => None,
-            };
-            let Some(graph) = ready else {
-                k += 1;
-                continue;
-            };
-            let cmd = match &all[i] {
-                Job::Discover { spec } => discover_command(&plan, spec)?,
-                Job::Train {
-                    maze,
-                    task,
-                    config,
-                    seed,
-                    ..
-                } => train_command(
-                    &plan,
-                    &plan.grid.train_config(*maze),
-                    *maze,
-                    *task,
-                    config,
-                    *seed,
-                    graph.as_deref(),
-                )?,
-            };
-            let child = start(cmd, &plan.log_path(&all[i]), plan.threads)?;
-            running.push((i, child, Instant::now()));
-            queue.remove(k);
-        }
-        if running.is_empty() && queue.is_empty() {
-            break;
-        }
-        let names: Vec<String> = running
-            .iter()
-            .map(|(i, _, _)| Plan::label(&all[*i]))
-            .collect();
-        bar.set_message(format!(
-            "done {done_now}, running {} [{}], left {}, failed {}",
-            running.len(),
-            names.join(", "),
-            queue.len(),
-            failed.len()
-        ));
-        std::thread::sleep(Duration::from_millis(250));
-    }
-    bar.finish_and_clear();
-    eprintln!(
-        "experiment {}: {} runs finished, {} failed; `worldgraph table {}` renders the tables",
-        plan.grid.name,
-        done_now,
-        failed.len(),
-        plan.results.display()
-    );
-    for (i, e) in &failed {
-        eprintln!("  failed {}: {e}", Plan::label(&all[*i]));
-    }
-    Ok(if failed.is_empty() {
-        std::process::ExitCode::SUCCESS
-    } else {
-        std::process::ExitCode::FAILURE
-    })
+    Ok(())
 }
 
 fn score_note(plan: &Plan, job: &Job) -> String {

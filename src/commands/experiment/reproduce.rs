@@ -66,7 +66,9 @@ pub(super) fn reproduce(
     };
     let plan = Plan {
         grid,
+        grid_path: PathBuf::from(&r.grid),
         grid_label: r.grid.clone(),
+        grid_digest: String::new(),
         work: work.clone(),
         results: work.join("results"),
         threads: r.torch_threads,
