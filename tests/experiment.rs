@@ -259,7 +259,7 @@ fn a_stopped_grid_resumes_to_the_uninterrupted_result() {
         .spawn()
         .unwrap();
     // Stop it once its run has checkpointed a segment.
-    let state = d.join("runs/experiments/stopped/small/multigoal/a2c/seed-0/checkpoint/state.json");
+    let state = d.join("stopped/runs/stopped/small/multigoal/a2c/seed-0/checkpoint/state.json");
     let t0 = Instant::now();
     while !state.exists() && t0.elapsed() < Duration::from_secs(120) {
         std::thread::sleep(Duration::from_millis(20));
@@ -333,7 +333,10 @@ fn bad_grids_are_refused_naming_what_is_wrong() {
         std::fs::write(d.join("bad.toml"), &text).unwrap();
         let err = refused(&worldgraph(d, &["experiment", "bad.toml"]));
         assert!(err.contains(what), "{what:?} not in {err}");
-        assert!(!d.join("runs").exists(), "a refused grid starts nothing");
+        assert!(
+            !d.join("runs").exists() && !d.join("results").exists(),
+            "a refused grid starts nothing"
+        );
     }
     let err = refused(&worldgraph(d, &["table", "nothing-here"]));
     assert!(err.contains("nothing-here"), "{err}");
@@ -358,7 +361,7 @@ fn a_grid_killed_with_sigkill_takes_its_runs_with_it() {
         .spawn()
         .unwrap();
     let pid = parent.id();
-    let run = d.join("runs/experiments/long/small/multigoal/a2c/seed-0");
+    let run = d.join("results/runs/long/small/multigoal/a2c/seed-0");
     let t0 = Instant::now();
     while !(children_of(pid).len() == 1 && run.join("seeds.json").exists())
         && t0.elapsed() < Duration::from_secs(60)
@@ -444,7 +447,10 @@ fn a_grid_is_checked_whole_at_load_and_filters_that_select_nothing_warn() {
             "{what:?} not in {err}"
         );
     }
-    assert!(!d.join("runs").exists(), "a refused grid starts nothing");
+    assert!(
+        !d.join("runs").exists() && !d.join("results").exists(),
+        "a refused grid starts nothing"
+    );
     // Filters that select no run say so.
     std::fs::write(d.join("ok.toml"), grid("g", 3840, "\"a2c\"")).unwrap();
     let (out, err) = ok(&worldgraph(

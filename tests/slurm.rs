@@ -196,7 +196,7 @@ fn dry_run_prints_one_array_per_stage_the_training_after_the_discoveries() {
     );
     // Cells 0-1 are the discoveries, 2-5 the training runs.
     assert!(
-        out.contains("# sbatch --parsable --account=rl runs/experiments/dry/slurm/scripts/"),
+        out.contains("# sbatch --parsable --account=rl results/runs/dry/slurm/scripts/"),
         "{out}"
     );
     assert!(out.contains("#SBATCH --array=0-1%3\n"), "{out}");
@@ -227,11 +227,11 @@ fn dry_run_prints_one_array_per_stage_the_training_after_the_discoveries() {
         "{out}"
     );
     assert!(
-        out.contains("'experiment' 'grid.toml' '--results' 'results' '--work' 'runs/experiments/dry' '--threads' '1' '--jobs' '3' '--grid-digest' '"),
+        out.contains("'experiment' 'grid.toml' '--results' 'results' '--work' 'results/runs/dry' '--threads' '1' '--jobs' '3' '--grid-digest' '"),
         "{out}"
     );
     assert!(out.contains(" --cell \"$SLURM_ARRAY_TASK_ID\"\n"), "{out}");
-    assert!(!d.join("runs").exists(), "a dry run writes nothing");
+    assert!(!d.join("results").exists(), "a dry run writes nothing");
 }
 
 #[test]
@@ -325,12 +325,12 @@ fn missing_or_refusing_sbatch_and_a_changed_grid_are_clear_errors() {
         &["experiment", "grid.toml", "--slurm", "--partition", "nope"],
     ));
     assert!(
-        err.contains("sbatch refused runs/experiments/errors/slurm/scripts/")
+        err.contains("sbatch refused results/runs/errors/slurm/scripts/")
             && err.contains("Invalid partition name specified"),
         "{err}"
     );
     assert!(
-        !d.join("runs/experiments/errors/slurm/submissions.jsonl")
+        !d.join("results/runs/errors/slurm/submissions.jsonl")
             .exists()
     );
 
@@ -379,7 +379,7 @@ fn status_follows_a_local_grid_and_names_a_failed_cells_log() {
         "{out}"
     );
     // Seed 1's run directory holds a file of another kind: its train refuses it.
-    let run = d.join("runs/experiments/local/small/multigoal/a2c/seed-1");
+    let run = d.join("results/runs/local/small/multigoal/a2c/seed-1");
     std::fs::create_dir_all(&run).unwrap();
     std::fs::write(run.join("mine.txt"), "not a run").unwrap();
     let err = refused(&worldgraph(d, &["experiment", "grid.toml"]));
@@ -392,8 +392,8 @@ fn status_follows_a_local_grid_and_names_a_failed_cells_log() {
     assert!(
         out.contains(
             "failed   small/multigoal/a2c/seed-1  train ended with exit status: 1: error: --run \
-             runs/experiments/local/small/multigoal/a2c/seed-1 is not empty and not a train run"
-        ) && out.ends_with("; log runs/experiments/local/logs/small_multigoal_a2c_seed-1.log\n"),
+             results/runs/local/small/multigoal/a2c/seed-1 is not empty and not a train run"
+        ) && out.ends_with("; log results/runs/local/logs/small_multigoal_a2c_seed-1.log\n"),
         "{out}"
     );
 }

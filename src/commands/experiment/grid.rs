@@ -16,7 +16,8 @@ use sim::{Maze, Task};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Grid {
-    /// Name; the runs' working files go to `runs/experiments/<name>/`.
+    /// Name; the runs' working files go to `<results>/runs/<name>/` unless
+    /// `--work` says otherwise.
     pub name: String,
     /// Training seeds of every cell (the paper: 3).
     pub seeds: Vec<u64>,

@@ -61,7 +61,10 @@ pub struct ExperimentArgs {
     #[arg(long, default_value = "results")]
     pub results: PathBuf,
     /// Working directory of the runs (checkpoints, logs, discovery runs,
-    /// SLURM scripts and output) [default: runs/experiments/<grid name>].
+    /// SLURM scripts and output) [default: <results>/runs/<grid name>,
+    /// beside the summaries, so that on a cluster one shared directory
+    /// holds everything; runs/experiments/<grid name> when a grid begun
+    /// before that default has its runs there].
     #[arg(long)]
     pub work: Option<PathBuf>,
     /// Only these mazes (repeatable).
@@ -166,6 +169,20 @@ struct Plan {
     commit: String,
 }
 
+
+/// The default working directory of grid `name` with summaries under
+/// `results`: `<results>/runs/<name>`, or the `runs/experiments/<name>`
+/// of a grid begun before that default, so its runs resume where they are.
+fn default_work(results: &Path, name: &str) -> PathBuf {
+    let legacy = PathBuf::from("runs/experiments").join(name);
+    let beside = results.join("runs").join(name);
+    if legacy.is_dir() && !beside.exists() {
+        legacy
+    } else {
+        beside
+    }
+}
+
 impl Plan {
     /// The plan of `worldgraph experiment GRID` with the options in `a`.
     fn new(a: &ExperimentArgs, grid_path: &Path) -> anyhow::Result<Plan> {
@@ -178,7 +195,7 @@ impl Plan {
             work: a
                 .work
                 .clone()
-                .unwrap_or_else(|| PathBuf::from("runs/experiments").join(&grid.name)),
+                .unwrap_or_else(|| default_work(&a.results, &grid.name)),
             results: a.results.clone(),
             threads,
             jobs: a.jobs.unwrap_or((cores / threads).max(1)).max(1),
