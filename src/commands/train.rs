@@ -769,6 +769,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     protocol::load_best(&a.run, &mut agent)?;
     let mut env = eval_env(&layout, env_cfg, TEST_STREAM, first, (end - first) as usize)?;
     let mut scores = Vec::new();
+    let mut episodes = EpisodeFigures::default();
     let mut trace = EpisodeTrace::default();
     for k in 0..a.episodes_per_seed {
         let t = (k == 0).then_some(&mut trace);
@@ -778,8 +779,10 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             agent.evaluate(&mut env, k as u64, None)?
         };
         scores.push(r.score);
+        episodes.add(&r);
     }
     let score = scores.iter().sum::<f64>() / scores.len() as f64;
+    let episodes = episodes.means();
     if let Some(p) = &a.picture {
         episode_picture(
             &layout,
@@ -794,7 +797,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     if a.json {
         println!(
             "{}",
-            serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": unfinished.is_none(), "env_steps": state.env_steps})
+            serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": unfinished.is_none(), "env_steps": state.env_steps, "episodes": episodes})
         );
     } else {
         println!(
@@ -808,7 +811,54 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
                 None => String::new(),
             }
         );
+        println!(
+            "episodes: return {:.3}, exit reached {:.1} %, length {:.1} steps{}",
+            episodes.mean_return,
+            100.0 * episodes.exit_share,
+            episodes.mean_length,
+            if id.task.is_multigoal() {
+                format!(", balls collected {:.2}", episodes.mean_balls)
+            } else {
+                String::new()
+            }
+        );
     }
     let _ = BatchEnvironment::num_envs(&env);
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// What `evaluate`'s episodes did, over every round: the mean return, the
+/// share that reached the exit, the mean length and the mean number of
+/// balls collected (so a MultiGoal-Sparse score can be read as balls
+/// against steps).
+#[derive(Debug, Default, Clone, Copy, serde::Serialize)]
+struct EpisodeFigures {
+    episodes: usize,
+    mean_return: f64,
+    exit_share: f64,
+    mean_length: f64,
+    mean_balls: f64,
+}
+
+impl EpisodeFigures {
+    /// Adds one round's episodes (sums until [`Self::means`]).
+    fn add(&mut self, r: &learner::hrl::stats::EvalResult) {
+        self.episodes += r.returns.len();
+        self.mean_return += r.returns.iter().map(|&x| f64::from(x)).sum::<f64>();
+        self.exit_share += r.success_rate * r.returns.len() as f64;
+        self.mean_length += r.lengths.iter().map(|&x| f64::from(x)).sum::<f64>();
+        self.mean_balls += r.balls.iter().map(|&x| f64::from(x)).sum::<f64>();
+    }
+
+    /// The sums as means over the episodes.
+    fn means(self) -> EpisodeFigures {
+        let n = self.episodes.max(1) as f64;
+        EpisodeFigures {
+            episodes: self.episodes,
+            mean_return: self.mean_return / n,
+            exit_share: self.exit_share / n,
+            mean_length: self.mean_length / n,
+            mean_balls: self.mean_balls / n,
+        }
+    }
 }

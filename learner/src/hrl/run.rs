@@ -382,6 +382,7 @@ impl HrlAgent {
         let mut done = vec![false; n];
         let mut returns = vec![0f32; n];
         let mut lengths = vec![0u32; n];
+        let mut balls = vec![0u8; n];
         let mut success = vec![false; n];
         let mut counts = StepCounts::for_task(self.task);
         let mut trace = trace.map(|t| {
@@ -405,6 +406,7 @@ impl HrlAgent {
                     done[e] = true;
                     returns[e] = m.episode_return;
                     lengths[e] = m.episode_len;
+                    balls[e] = m.balls;
                     success[e] = reached_exit(&obs, e);
                 }
             }
@@ -424,6 +426,7 @@ impl HrlAgent {
             success_rate,
             returns,
             lengths,
+            balls,
             traversal_share: counts.traversal_share(),
         })
     }

@@ -66,6 +66,8 @@ pub struct EvalResult {
     pub returns: Vec<f32>,
     /// Episode lengths.
     pub lengths: Vec<u32>,
+    /// Balls collected in each episode (the MultiGoal tasks).
+    pub balls: Vec<u8>,
     /// Share of steps taken by traversal.
     pub traversal_share: f64,
 }
