@@ -173,6 +173,14 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
         e["score"], t["test_score"],
         "evaluate reproduces the test score"
     );
+    // The episodes' figures are those episodes': on MultiGoal a return is
+    // the balls collected, +1 at the exit and -0.01 a step.
+    let ep = &e["episodes"];
+    let f = |k: &str| ep[k].as_f64().unwrap();
+    assert_eq!(ep["episodes"], 5);
+    assert!((f("mean_return") - t["test_return"].as_f64().unwrap()).abs() < 1e-6, "{ep}");
+    let rebuilt = f("mean_balls") + f("exit_share") - 0.01 * f("mean_length");
+    assert!((rebuilt - f("mean_return")).abs() < 1e-4, "{ep}");
 }
 
 /// `train` arguments of WN over `V_p` with traversal on the small maze's
