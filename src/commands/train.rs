@@ -571,30 +571,48 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
 /// Door-Key's picture of how the task's steps were learnt.
 const OBJECTS_PNG: &str = "objects.png";
 
-/// Door-Key: per update, the shares of the training episodes that took the
-/// key, opened the door and reached the exit, and of the Manager's
-/// decisions that named the key or the locked door.
+/// Updates pooled into one point of [`object_curves`]: a hundred points
+/// over a run, each a share over enough episodes to read (one update ends
+/// anywhere from none to a few dozen).
+const OBJECT_CURVE_POINTS: usize = 100;
+
+/// Door-Key: the shares of the training episodes that took the key, opened
+/// the door and reached the exit, and of the Manager's decisions that named
+/// the key or the locked door, each pooled over a hundredth of the run
+/// (episode shares weighted by the episodes that ended in each update,
+/// decision shares by its Manager intervals; updates without any skipped).
 fn object_curves(rows: &[UpdateRow], s: &TestSummary) -> LineChart {
-    let line = |name: &str, f: fn(&UpdateRow) -> f64| Series {
+    let per_point = rows.len().div_ceil(OBJECT_CURVE_POINTS).max(1);
+    let line = |name: &str, f: fn(&UpdateRow) -> f64, weight: fn(&UpdateRow) -> usize| Series {
         name: name.into(),
-        points: rows.iter().map(|r| (r.env_steps as f64, f(r))).collect(),
+        points: rows
+            .chunks(per_point)
+            .filter_map(|bin| {
+                let (mut sum, mut n) = (0.0, 0usize);
+                for r in bin.iter().filter(|r| weight(r) > 0 && f(r).is_finite()) {
+                    sum += f(r) * weight(r) as f64;
+                    n += weight(r);
+                }
+                let last = bin.last()?;
+                (n > 0).then(|| (last.env_steps as f64, sum / n as f64))
+            })
+            .collect(),
     };
+    let episodes = |r: &UpdateRow| r.episodes;
+    let intervals = |r: &UpdateRow| r.intervals;
     let mut series = vec![
-        line("episodes that took the key", |r| r.key_taken_share),
-        line("episodes that opened the door", |r| r.door_share),
-        line("episodes that reached the exit", |r| r.exit_share),
+        line("episodes that took the key", |r| r.key_taken_share, episodes),
+        line("episodes that opened the door", |r| r.door_share, episodes),
+        line("episodes that reached the exit", |r| r.exit_share, episodes),
     ];
     if rows.iter().any(|r| r.intervals > 0) {
-        series.push(line("decisions naming the key", |r| r.key_goal_share));
-        series.push(line("decisions naming the locked door", |r| r.door_goal_share));
+        series.push(line("decisions naming the key", |r| r.key_goal_share, intervals));
+        series.push(line("decisions naming the locked door", |r| r.door_goal_share, intervals));
     }
     LineChart {
-        title: format!(
-            "Door-Key, {} on {} (seed {}): the key, the door, the exit",
-            s.agent, s.maze, s.seed
-        ),
+        title: format!("Door-Key: key, door, exit ({}, seed {})", s.agent, s.seed),
         x_label: "env steps".into(),
-        y_label: "share (per update)".into(),
+        y_label: "share (each point: 1/100 of the run)".into(),
         series,
         x_scale: XScale::Linear,
     }
