@@ -143,11 +143,11 @@ fn the_wide_then_narrow_worker_learns_to_reach_the_managers_goals() {
     eprintln!(
         "WN + V_p + π_g init on two rooms: Worker reaches its goal in {first:.3} → {last:.3} of the intervals; mean test return {before:.3} → {after:.3}"
     );
-    // The Worker learns the Manager's goals. (The task return does not rise
-    // within this budget: see docs/implementation_details.md, "Stage 2
-    // findings".)
-    assert!(
-        last > first + 0.1 && last > 1.5 * first,
-        "{first:.3} → {last:.3}"
-    );
+    // The Worker learns the Manager's goals (it reaches them half again as
+    // often, or more), and with `π_g`'s initialisation on the structure
+    // (its unseen ball plane as floor, its goal plane in `g_n`'s) the task
+    // return rises within this budget too; with the old initialisation it
+    // did not (docs/implementation_details.md, "Stage 2 findings").
+    assert!(last > 1.5 * first, "goals reached {first:.3} → {last:.3}");
+    assert!(after > before + 0.5, "mean test return {before:.3} → {after:.3}");
 }
