@@ -684,22 +684,56 @@ fn train_takes_a_door_key_layout_file_and_evaluate_reads_it_back() {
     );
     let run = dir.path().join("run");
     let out = worldgraph(&[
-        "train", "--task", "doorkey", "--layout", &layout, "--agent", "a2c", "--env-steps", "2000",
-        "--set", "eval_every=2000", "--set", "validation_seeds=2", "--set", "test_seeds=2",
-        "--run", run.to_str().unwrap(), "--json",
+        "train",
+        "--task",
+        "doorkey",
+        "--layout",
+        &layout,
+        "--agent",
+        "a2c",
+        "--env-steps",
+        "2000",
+        "--set",
+        "eval_every=2000",
+        "--set",
+        "validation_seeds=2",
+        "--set",
+        "test_seeds=2",
+        "--run",
+        run.to_str().unwrap(),
+        "--json",
     ]);
     let summary = json_lines(&out).pop().expect("a summary");
     assert_eq!(summary["task"], "doorkey");
     let kept = std::fs::read_to_string(run.join("layout.txt")).unwrap();
     assert_eq!(kept, std::fs::read_to_string(&layout).unwrap());
-    assert!(run.join("objects.png").is_file(), "Door-Key's key/door/exit curves");
-    let out = worldgraph(&["evaluate", run.to_str().unwrap(), "--seeds", "0..2", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        run.join("objects.png").is_file(),
+        "Door-Key's key/door/exit curves"
+    );
+    let out = worldgraph(&[
+        "evaluate",
+        run.to_str().unwrap(),
+        "--seeds",
+        "0..2",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // A layout without a key: the Door-Key task is refused, naming what is missing.
     let plain = write(dir.path(), "plain.txt", "#####\n#>.E#\n#####\n");
     let refused = dir.path().join("refused");
     let out = worldgraph(&[
-        "train", "--task", "doorkey", "--layout", &plain, "--run", refused.to_str().unwrap(),
+        "train",
+        "--task",
+        "doorkey",
+        "--layout",
+        &plain,
+        "--run",
+        refused.to_str().unwrap(),
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("needs a key (K) and a locked door (D)"));

@@ -178,7 +178,10 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
     let ep = &e["episodes"];
     let f = |k: &str| ep[k].as_f64().unwrap();
     assert_eq!(ep["episodes"], 5);
-    assert!((f("mean_return") - t["test_return"].as_f64().unwrap()).abs() < 1e-6, "{ep}");
+    assert!(
+        (f("mean_return") - t["test_return"].as_f64().unwrap()).abs() < 1e-6,
+        "{ep}"
+    );
     let rebuilt = f("mean_balls") + f("exit_share") - 0.01 * f("mean_length");
     assert!((rebuilt - f("mean_return")).abs() < 1e-4, "{ep}");
 }

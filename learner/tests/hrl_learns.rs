@@ -149,5 +149,8 @@ fn the_wide_then_narrow_worker_learns_to_reach_the_managers_goals() {
     // return rises within this budget too; with the old initialisation it
     // did not (docs/implementation_details.md, "Stage 2 findings").
     assert!(last > 1.5 * first, "goals reached {first:.3} → {last:.3}");
-    assert!(after > before + 0.5, "mean test return {before:.3} → {after:.3}");
+    assert!(
+        after > before + 0.5,
+        "mean test return {before:.3} → {after:.3}"
+    );
 }

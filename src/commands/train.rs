@@ -226,9 +226,10 @@ fn train_world(maze: Maze, file: Option<&Path>, task: Task) -> anyhow::Result<(L
 
 fn run_dir(a: &TrainArgs, layout: &Layout, cfg: &AgentConfig) -> PathBuf {
     let name = match &a.layout {
-        Some(p) => p
-            .file_stem()
-            .map_or_else(|| "layout".to_string(), |s| s.to_string_lossy().into_owned()),
+        Some(p) => p.file_stem().map_or_else(
+            || "layout".to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        ),
         None => layout.name.clone(),
     };
     a.run.clone().unwrap_or_else(|| {
@@ -601,13 +602,25 @@ fn object_curves(rows: &[UpdateRow], s: &TestSummary) -> LineChart {
     let episodes = |r: &UpdateRow| r.episodes;
     let intervals = |r: &UpdateRow| r.intervals;
     let mut series = vec![
-        line("episodes that took the key", |r| r.key_taken_share, episodes),
+        line(
+            "episodes that took the key",
+            |r| r.key_taken_share,
+            episodes,
+        ),
         line("episodes that opened the door", |r| r.door_share, episodes),
         line("episodes that reached the exit", |r| r.exit_share, episodes),
     ];
     if rows.iter().any(|r| r.intervals > 0) {
-        series.push(line("decisions naming the key", |r| r.key_goal_share, intervals));
-        series.push(line("decisions naming the locked door", |r| r.door_goal_share, intervals));
+        series.push(line(
+            "decisions naming the key",
+            |r| r.key_goal_share,
+            intervals,
+        ));
+        series.push(line(
+            "decisions naming the locked door",
+            |r| r.door_goal_share,
+            intervals,
+        ));
     }
     LineChart {
         title: format!("Door-Key: key, door, exit ({}, seed {})", s.agent, s.seed),
@@ -688,7 +701,11 @@ fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
     }
     println!(
         "  files: config.toml metrics.csv updates.csv tensorboard/ invocations.txt curves.png test.json episode.png{}",
-        if s.task == Task::DoorKey.name() { " objects.png" } else { "" }
+        if s.task == Task::DoorKey.name() {
+            " objects.png"
+        } else {
+            ""
+        }
     );
 }
 

@@ -175,6 +175,14 @@ pub struct AgentConfig {
     /// How the Wide-then-Narrow Worker's `g_n` plane starts under `π_g`
     /// initialisation ([`NarrowPlaneInit`]).
     pub narrow_plane_init: NarrowPlaneInit,
+    /// A count-based exploration bonus `β` (the paper uses none; MiniGrid's
+    /// `PositionBonus` wrapper): while training, every step adds
+    /// `β / √n` to the reward the agent learns its task from (the
+    /// Manager's; the flat baseline's), `n` the visits of the agent's cell
+    /// in its environment so far, counted across episodes. The bonus fades
+    /// as the maze is covered, so the task's optimum is kept; it is never
+    /// paid in validation or testing, and never to the Worker. 0: off.
+    pub count_bonus: f32,
 }
 
 /// How the first-layer weights of the inputs `π_g` never saw in training
@@ -266,6 +274,7 @@ impl Default for AgentConfig {
             object_goals: true,
             door_key_actions: DoorKeyActions::default(),
             worker_task_share: 0.0,
+            count_bonus: 0.0,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: true,
             unseen_inputs: UnseenInputs::default(),
@@ -291,6 +300,12 @@ impl AgentConfig {
         }
         if self.conv_channels.iter().any(|&c| c < 1) || self.hidden < 1 {
             return Err(ConfigError::new("hidden", "network sizes must be ≥ 1"));
+        }
+        if !(self.count_bonus.is_finite() && self.count_bonus >= 0.0) {
+            return Err(ConfigError::new(
+                "count_bonus",
+                format!("{} must be a finite bonus ≥ 0", self.count_bonus),
+            ));
         }
         if !(self.worker_task_share.is_finite() && self.worker_task_share >= 0.0) {
             return Err(ConfigError::new(
@@ -556,8 +571,14 @@ mod tests {
         assert_eq!(cfg.extra_candidates(&dk), vec![exit]);
         let plain = sim::Maze::Small.layout(false);
         let plain_exit = plain.cell_index(11, 11) as u32;
-        assert_eq!(AgentConfig::default().extra_candidates(&plain), vec![plain_exit]);
-        let off = AgentConfig { exit_candidate: false, ..AgentConfig::default() };
+        assert_eq!(
+            AgentConfig::default().extra_candidates(&plain),
+            vec![plain_exit]
+        );
+        let off = AgentConfig {
+            exit_candidate: false,
+            ..AgentConfig::default()
+        };
         assert!(off.extra_candidates(&plain).is_empty());
     }
 

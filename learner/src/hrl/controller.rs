@@ -73,6 +73,10 @@ pub(super) struct Controller {
     pub(super) manager_init: Option<LstmState>,
     /// Draws the Worker's, the Manager's and `π_g`'s actions.
     pub(super) rng: ReplayRng,
+    /// Training visits of each cell, by environment (the count-based
+    /// bonus, [`super::config::AgentConfig::count_bonus`]); empty until
+    /// the first bonus is paid.
+    pub(super) visits: Vec<Vec<u32>>,
 }
 
 /// What of a [`Controller`] is not a tensor, as saved with a training
@@ -82,6 +86,9 @@ struct ControllerRecord {
     envs: Vec<EnvCtl>,
     queues: Vec<DecisionQueue>,
     rng: RngState,
+    /// Absent from the checkpoints of runs before the count-based bonus.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    visits: Vec<Vec<u32>>,
 }
 
 /// A training controller as a checkpoint saves it
@@ -119,7 +126,24 @@ impl Controller {
                 .collect(),
             manager_init: manager.map(|m| m.zero_state(n as i64)),
             rng: ReplayRng::seed_from_u64(seed),
+            visits: Vec::new(),
         }
+    }
+
+    /// Counts a training visit of `cell` (of a grid of `cells`) in
+    /// environment `e` and returns the count-based bonus `beta / √n`, `n`
+    /// the visits so far, this one included (MiniGrid's `PositionBonus`).
+    pub(super) fn visit_bonus(&mut self, e: usize, cell: u32, cells: usize, beta: f32) -> f32 {
+        if self.visits.len() != self.envs.len() {
+            self.visits = vec![vec![0; cells]; self.envs.len()];
+        }
+        let counts = &mut self.visits[e];
+        if counts.len() < cells {
+            counts.resize(cells, 0);
+        }
+        let n = &mut counts[cell as usize];
+        *n += 1;
+        beta / (*n as f32).sqrt()
     }
 
     /// The Worker's goals, by environment.
@@ -178,6 +202,7 @@ impl Controller {
             envs: self.envs.clone(),
             queues: self.queues.clone(),
             rng: self.rng.state(),
+            visits: self.visits.clone(),
         };
         let json = serde_json::to_vec(&record).map_err(|e| LearnerError::Checkpoint {
             path: "controller".into(),
@@ -254,6 +279,7 @@ impl Controller {
             queues: record.queues,
             manager_init,
             rng: ReplayRng::from_state(record.rng),
+            visits: record.visits,
         };
         Ok(())
     }

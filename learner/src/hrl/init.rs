@@ -223,10 +223,23 @@ mod tests {
         copy_forward_row(&src, &worker_vs);
         let d = worker_vs.variables();
         for k in 3..6 {
-            assert!(d["policy.weight"].narrow(0, k, 1).equal(&s["policy.weight"].narrow(0, 2, 1)));
-            assert!(d["policy.bias"].narrow(0, k, 1).equal(&s["policy.bias"].narrow(0, 2, 1)));
+            assert!(
+                d["policy.weight"]
+                    .narrow(0, k, 1)
+                    .equal(&s["policy.weight"].narrow(0, 2, 1))
+            );
+            assert!(
+                d["policy.bias"]
+                    .narrow(0, k, 1)
+                    .equal(&s["policy.bias"].narrow(0, 2, 1))
+            );
         }
-        assert!(d["policy.weight"].narrow(0, 0, 3).equal(&s["policy.weight"]), "π_g's rows stay");
+        assert!(
+            d["policy.weight"]
+                .narrow(0, 0, 3)
+                .equal(&s["policy.weight"]),
+            "π_g's rows stay"
+        );
 
         // A Manager trunk without the goal channel: the encoder is copied,
         // the first convolution without its goal plane; the core is not.
@@ -305,12 +318,24 @@ mod tests {
         let (vs, net) = worker(&cfg);
         let (w, s) = (&vs.variables()[CONV1], &gcp.var_store().variables()[CONV1]);
         let plane = |t: &Tensor, k: usize| t.narrow(1, k as i64, 1);
-        assert!(plane(w, GOAL_CHANNEL + 1).equal(&plane(s, GOAL_CHANNEL)), "g_n plane");
+        assert!(
+            plane(w, GOAL_CHANNEL + 1).equal(&plane(s, GOAL_CHANNEL)),
+            "g_n plane"
+        );
         for kind in [Object::Ball, Object::Key, Object::DoorLocked, Object::Lava] {
-            assert!(plane(w, kind as usize).equal(&plane(s, Object::Floor as usize)), "{kind:?}");
+            assert!(
+                plane(w, kind as usize).equal(&plane(s, Object::Floor as usize)),
+                "{kind:?}"
+            );
         }
         assert!(plane(w, Object::Exit as usize).equal(&plane(s, Object::Exit as usize)));
-        assert_eq!(plane(w, KEY_CHANNEL).abs().sum(tch::Kind::Float).double_value(&[]), 0.0);
+        assert_eq!(
+            plane(w, KEY_CHANNEL)
+                .abs()
+                .sum(tch::Kind::Float)
+                .double_value(&[]),
+            0.0
+        );
 
         // In front of the locked door with the key in hand, `g_n` on the
         // door (`g_w` unmarked): the Worker's policy is π_g's on the
@@ -322,20 +347,48 @@ mod tests {
         meta[0].x = 5;
         meta[0].y = 9;
         meta[0].dir = 0;
-        let logits = |cells: &[u8], meta: &[EnvMeta], goals: &[u32], planes: usize, net: &ActorCritic| {
-            let view = ObsView { seq: 0, cells, final_cells: &[], meta, width: dk.width, height: dk.height };
-            let mut input = CellInput::new(dk.width, dk.height, planes);
-            input.push_obs(&view, Some(GoalMarks { cells: goals, per_env: planes }));
-            tch::no_grad(|| net.step(&input, &net.zero_state(1))).logits.narrow(1, 0, 3)
-        };
+        let logits =
+            |cells: &[u8], meta: &[EnvMeta], goals: &[u32], planes: usize, net: &ActorCritic| {
+                let view = ObsView {
+                    seq: 0,
+                    cells,
+                    final_cells: &[],
+                    meta,
+                    width: dk.width,
+                    height: dk.height,
+                };
+                let mut input = CellInput::new(dk.width, dk.height, planes);
+                input.push_obs(
+                    &view,
+                    Some(GoalMarks {
+                        cells: goals,
+                        per_env: planes,
+                    }),
+                );
+                tch::no_grad(|| net.step(&input, &net.zero_state(1)))
+                    .logits
+                    .narrow(1, 0, 3)
+            };
         let mut with_key = meta;
         with_key[0].carrying = Object::Key as u8;
-        let structure: Vec<u8> = dk.structural().cells.iter().map(|&c| {
-            if c == Object::DoorOpen as u8 { Object::Floor as u8 } else { c }
-        }).collect();
+        let structure: Vec<u8> = dk
+            .structural()
+            .cells
+            .iter()
+            .map(|&c| {
+                if c == Object::DoorOpen as u8 {
+                    Object::Floor as u8
+                } else {
+                    c
+                }
+            })
+            .collect();
         let worker_view = logits(&dk.cells, &with_key, &[NO_GOAL, door], 2, &net);
         let pi_g_view = logits(&structure, &meta, &[door], 1, gcp.network());
-        assert!(worker_view.allclose(&pi_g_view, 1e-5, 1e-5, false), "{worker_view} vs {pi_g_view}");
+        assert!(
+            worker_view.allclose(&pi_g_view, 1e-5, 1e-5, false),
+            "{worker_view} vs {pi_g_view}"
+        );
 
         // The settings of before: the carried key moves the logits.
         let old = AgentConfig {

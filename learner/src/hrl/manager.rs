@@ -324,7 +324,11 @@ impl ManagerSide {
             made.exit_goals += usize::from(named == Some(sim::Object::Exit as u8));
             made.ball_goals += usize::from(named == Some(sim::Object::Ball as u8));
             // Door-Key: either goal on the key, or on a door not yet open.
-            let on = |o: sim::Object| [gw, gn].iter().any(|&g| grid.get(g as usize) == Some(&(o as u8)));
+            let on = |o: sim::Object| {
+                [gw, gn]
+                    .iter()
+                    .any(|&g| grid.get(g as usize) == Some(&(o as u8)))
+            };
             made.key_goals += usize::from(on(sim::Object::Key));
             made.door_goals +=
                 usize::from(on(sim::Object::DoorLocked) || on(sim::Object::DoorClosed));
@@ -384,7 +388,10 @@ impl ManagerSide {
                 // the narrow goal is the object itself, so the interval
                 // ends when the Worker acts on it.
                 let centre = window.slot_of(gw, gw).expect("the centre is in its window");
-                valid.iter_mut().enumerate().for_each(|(k, v)| *v = k == centre);
+                valid
+                    .iter_mut()
+                    .enumerate()
+                    .for_each(|(k, v)| *v = k == centre);
             } else if let Some(k) = window.slot_of(gw, here)
                 && valid.iter().filter(|&&v| v).count() > 1
             {

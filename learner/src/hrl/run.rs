@@ -108,10 +108,7 @@ impl HrlAgent {
         let out = self.worker.act(obs, &marks, &ctl.worker_state, train);
         let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
         let choices = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
-        let mut actions: Vec<u8> = choices
-            .iter()
-            .map(|&i| self.actions[i as usize])
-            .collect();
+        let mut actions: Vec<u8> = choices.iter().map(|&i| self.actions[i as usize]).collect();
         // Only object goals are judged on the objects under the goals.
         let goal_objects = if self.cfg.object_goals && self.manager.is_some() {
             ctl.goals()
@@ -188,8 +185,16 @@ impl HrlAgent {
             if let Some(t) = trace.as_deref_mut() {
                 t.step(&obs, e, cell, traversing[e], ended);
             }
+            // The count-based exploration bonus (training only).
+            let bonus = if train && self.cfg.count_bonus > 0.0 {
+                let cells = obs.env_cells(e).len();
+                ctl.visit_bonus(e, cell, cells, self.cfg.count_bonus)
+            } else {
+                0.0
+            };
             if self.manager.is_none() {
                 (book.rewards[e], book.dones[e]) = a2c::task_step(m);
+                book.rewards[e] += bonus;
                 if m.truncated() {
                     book.cut_worker.push(e);
                 }
@@ -198,7 +203,7 @@ impl HrlAgent {
             }
             let mut interval_over = ended;
             if train {
-                ctl.book_manager_reward(e, m.reward);
+                ctl.book_manager_reward(e, m.reward + bonus);
             }
             if traversing[e] {
                 stats.traversal_steps += 1;
@@ -217,7 +222,11 @@ impl HrlAgent {
                 interval_over |= s.interval_over;
             } else {
                 let arrival = if self.cfg.object_goals {
-                    let grid = if ended { obs.env_final_cells(e) } else { obs.env_cells(e) };
+                    let grid = if ended {
+                        obs.env_final_cells(e)
+                    } else {
+                        obs.env_cells(e)
+                    };
                     let before = acted.goal_objects[e];
                     let after = before.map(|(c, o)| grid.get(c as usize).copied().unwrap_or(o));
                     Arrival::of_step(cell, before, after)
@@ -232,8 +241,8 @@ impl HrlAgent {
                 }
                 // FeUdal's `r^I + α r`: the task's own payoffs, not its
                 // step penalty (the Worker pays its own).
-                book.rewards[e] = s.reward
-                    + self.cfg.worker_task_share * (m.reward - sim::task::STEP_PENALTY);
+                book.rewards[e] =
+                    s.reward + self.cfg.worker_task_share * (m.reward - sim::task::STEP_PENALTY);
                 book.dones[e] = s.done;
                 book.weights[e] = 1.0;
             }
@@ -267,9 +276,12 @@ impl HrlAgent {
             {
                 m.bootstrap_cut(ctl, &obs, &book.cut_manager);
             }
-            self.worker
-                .rollout
-                .record(&self.recorded(&acted), &book.rewards, &book.dones, &book.weights);
+            self.worker.rollout.record(
+                &self.recorded(&acted),
+                &book.rewards,
+                &book.dones,
+                &book.weights,
+            );
         }
         if acted.steered {
             self.traverser.book_steered(&acted.actions, &book.legs);

@@ -276,7 +276,11 @@ impl Tracing<'_> {
         } else {
             obs.env_cells(e)
         };
-        let open = |g: &[u8]| g.iter().filter(|&&c| c == sim::Object::DoorOpen as u8).count();
+        let open = |g: &[u8]| {
+            g.iter()
+                .filter(|&&c| c == sim::Object::DoorOpen as u8)
+                .count()
+        };
         if t.door_step.is_none() && !t.start_cells.is_empty() && open(grid) > open(&t.start_cells) {
             t.door_step = Some(self.step);
         }

@@ -342,3 +342,57 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
     }
     assert_eq!(counts.intervals, 0);
 }
+
+#[test]
+fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpoint() {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 3;
+    let beta = 0.5;
+    let cfg = AgentConfig {
+        count_bonus: beta,
+        ..small(AgentKind::WideNarrow, Candidates::All, n)
+    };
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
+    let mut env = corridors(n, 100);
+    let mut ctl = agent.controller(n, 11);
+    agent.worker.rollout.start(&ctl.worker_state);
+    let mut counts = stats::StepCounts::default();
+    let mut visits = vec![std::collections::HashMap::<u32, u32>::new(); n];
+    let mut expected = vec![0f32; n];
+    for _ in 0..12 {
+        agent
+            .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+            .expect("step");
+        let obs = env.observe();
+        for (e, sum) in expected.iter_mut().enumerate() {
+            let v = visits[e].entry(obs.end_cell(e)).or_default();
+            *v += 1;
+            *sum += obs.meta[e].reward + beta / (*v as f32).sqrt();
+        }
+    }
+    for (e, sum) in expected.iter().enumerate() {
+        let booked: f32 = ctl.queues[e]
+            .decisions
+            .iter()
+            .flat_map(|d| d.rewards.iter())
+            .sum();
+        assert!(
+            (booked - sum).abs() < 1e-4,
+            "env {e}: the Manager booked {booked}, the task and the bonus {sum}"
+        );
+    }
+    assert!(
+        visits.iter().any(|v| v.values().any(|&c| c > 1)),
+        "some cell was visited twice, so the bonus faded somewhere"
+    );
+    let saved = ctl.save().expect("save");
+    let mut back = agent.controller(n, 0);
+    back.restore(
+        &saved.record,
+        &saved.tensors,
+        std::path::Path::new("test"),
+        n,
+    )
+    .expect("restore");
+    assert_eq!(back.visits, ctl.visits, "the counts resume with the run");
+}

@@ -754,7 +754,7 @@ mod tests {
     /// to the key stops in front of it, facing it, so a pickup takes it.
     #[test]
     fn one_graph_serves_door_key_its_door_route_waits_for_the_door_and_the_key_route_faces_the_key()
-     {
+    {
         let dk = Maze::Small.layout(true);
         let at = |x, y| dk.cell_index(x, y) as u32;
         let (left, right, door, key) = (at(4, 9), at(8, 9), at(6, 9), at(9, 2));
@@ -773,10 +773,20 @@ mod tests {
         let mut finals = vec![0u8; dk.cells.len()];
         env.observe(&mut cells, &mut meta[0]);
         let plan = |cells: &[u8], meta: &[EnvMeta], target: u32, route: &mut Route| {
-            Traversal::plan(&g, &view(&dk, cells, meta), 0, target, Execution::Replay, route)
+            Traversal::plan(
+                &g,
+                &view(&dk, cells, meta),
+                0,
+                target,
+                Execution::Replay,
+                route,
+            )
         };
         assert_eq!(cells[door as usize], Object::DoorLocked as u8);
-        assert!(plan(&cells, &meta, right, &mut route).is_none(), "the door is locked");
+        assert!(
+            plan(&cells, &meta, right, &mut route).is_none(),
+            "the door is locked"
+        );
         // The same route once the door is open: through the door cell.
         let mut open = cells.clone();
         open[door as usize] = Object::DoorOpen as u8;
@@ -796,9 +806,16 @@ mod tests {
                 }
             }
         }
-        assert!(arrived, "the replay follows the route to the cell before the key");
+        assert!(
+            arrived,
+            "the replay follows the route to the cell before the key"
+        );
         env.step(sim::action::PICKUP, &mut cells, &mut finals, &mut meta[0]);
-        assert_eq!(meta[0].carrying, Object::Key as u8, "facing the key, pickup takes it");
+        assert_eq!(
+            meta[0].carrying,
+            Object::Key as u8,
+            "facing the key, pickup takes it"
+        );
         assert_eq!(cells[key as usize], Object::Floor as u8);
     }
 

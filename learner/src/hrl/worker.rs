@@ -186,8 +186,7 @@ impl WorkerGoal {
         let moved = cell != self.last_cell;
         self.last_cell = cell;
         let reached = (moved && cell == self.narrow) || arrival.acted_on_narrow;
-        let wide_now =
-            ((moved && cell == self.wide) || arrival.acted_on_wide) && !self.wide_paid;
+        let wide_now = ((moved && cell == self.wide) || arrival.acted_on_wide) && !self.wide_paid;
         if wide_now {
             self.wide_paid = true;
         }
@@ -410,7 +409,10 @@ mod tests {
         assert_eq!(s.reward, penalty, "g_w is paid once per interval");
         // A cell that held no object the agent acts on is reached by walking.
         let floor = [(door, Floor as u8), (key, Floor as u8)];
-        assert_eq!(Arrival::of_step(beside, floor, [Key as u8, Floor as u8]), Arrival::walked(beside));
+        assert_eq!(
+            Arrival::of_step(beside, floor, [Key as u8, Floor as u8]),
+            Arrival::walked(beside)
+        );
     }
 
     #[test]

@@ -169,7 +169,6 @@ struct Plan {
     commit: String,
 }
 
-
 /// The default working directory of grid `name` with summaries under
 /// `results`: `<results>/runs/<name>`, or the `runs/experiments/<name>`
 /// of a grid begun before that default, so its runs resume where they are.
