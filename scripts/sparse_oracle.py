@@ -1,0 +1,105 @@
+#!/usr/bin/env python3
+"""The best MultiGoal-Sparse score a maze allows: an oracle that sees the
+balls and plans.
+
+For each random spawn of the balls (uniform over the free floor cells other
+than the agent's start, as the simulator spawns them), the oracle tries every
+subset and order of the balls followed by the exit, each leg a shortest path
+in the simulator's moves (`left`, `right`, `forward`, one step each; the exit
+ends the episode, so no leg crosses it), and keeps the best score
+`balls / spawned - 0.01 * steps`. Balls a route crosses on the way are not
+counted, so the figure is a slight underestimate.
+
+Standard library only:
+
+    python3 scripts/sparse_oracle.py sim/mazes/small.txt 200
+"""
+
+import argparse
+import collections
+import itertools
+import random
+
+STEP_PENALTY = 0.01
+# east, south, west, north: the simulator's directions, `>` faces east.
+DIRS = [(1, 0), (0, 1), (-1, 0), (0, -1)]
+FACING = {">": 0, "v": 1, "<": 2, "^": 3}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("layout", help="a layout file (sim/mazes/*.txt)")
+    ap.add_argument("spawns", type=int, nargs="?", default=200, help="random spawns averaged")
+    ap.add_argument("--balls", type=int, default=5, help="balls per spawn")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the spawns")
+    a = ap.parse_args()
+
+    rows = [r for r in open(a.layout).read().split("\n") if r]
+    cells = {(x, y): ch for y, r in enumerate(rows) for x, ch in enumerate(r)}
+    start = next((c, FACING[ch]) for c, ch in cells.items() if ch in FACING)
+    exit_cell = next(c for c, ch in cells.items() if ch == "E")
+    free = [c for c, ch in cells.items() if ch in "." or ch in FACING]
+
+    cache = {}
+
+    def dist_from(s):
+        """Steps from state `s = (x, y, dir)` to every reachable state."""
+        if s not in cache:
+            dist = {s: 0}
+            q = collections.deque([s])
+            while q:
+                x, y, d = cur = q.popleft()
+                nxt = [(x, y, (d + 1) % 4), (x, y, (d + 3) % 4)]
+                fx, fy = x + DIRS[d][0], y + DIRS[d][1]
+                if cells.get((fx, fy), "#") != "#" and (fx, fy) != exit_cell:
+                    nxt.append((fx, fy, d))
+                for n in nxt:
+                    if n not in dist:
+                        dist[n] = dist[cur] + 1
+                        q.append(n)
+            cache[s] = dist
+        return cache[s]
+
+    def to_exit(s):
+        d = dist_from(s)
+        best = float("inf")
+        for k, (dx, dy) in enumerate(DIRS):
+            before = (exit_cell[0] - dx, exit_cell[1] - dy, k)
+            if before in d:
+                best = min(best, d[before] + 1)
+        return best
+
+    rng = random.Random(a.seed)
+    spawnable = [c for c in free if c != start[0]]
+    s0 = (start[0][0], start[0][1], start[1])
+    total = balls_total = steps_total = 0.0
+    for _ in range(a.spawns):
+        balls = rng.sample(spawnable, a.balls)
+        best = (-STEP_PENALTY * to_exit(s0), 0, to_exit(s0))
+        for order in itertools.permutations(range(a.balls)):
+            frontier = {s0: 0}
+            for i, b in enumerate(order):
+                nf = {}
+                for s, t in frontier.items():
+                    d = dist_from(s)
+                    for k in range(4):
+                        st = (balls[b][0], balls[b][1], k)
+                        if st in d and nf.get(st, float("inf")) > t + d[st]:
+                            nf[st] = t + d[st]
+                frontier = nf
+                steps = min(t + to_exit(s) for s, t in frontier.items())
+                score = (i + 1) / a.balls - STEP_PENALTY * steps
+                if score > best[0]:
+                    best = (score, i + 1, steps)
+        total += best[0]
+        balls_total += best[1]
+        steps_total += best[2]
+    n = a.spawns
+    print(
+        f"oracle: mean score {total / n:.3f}, balls {balls_total / n:.2f}, "
+        f"steps {steps_total / n:.1f} over {n} spawns of {a.balls} balls"
+    )
+
+
+if __name__ == "__main__":
+    main()
