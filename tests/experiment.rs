@@ -696,3 +696,56 @@ fn time_to_score_takes_a_longer_a2c_as_reference_and_bounds_censored_seeds() {
     let err = refused(&table("longer"));
     assert!(err.contains("not a flat A2C run"), "{err}");
 }
+
+/// Issue 47: the flat A2C on Door-Key is a column of Table 2 (the paper
+/// omits it), shown beside the paper's "not reported", from the committed
+/// summaries of `doorkey-fixed`, where it never opened the door.
+#[test]
+fn table_2_shows_the_flat_a2c_on_door_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let committed =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("results/doorkey-fixed/small/doorkey");
+    for config in ["a2c", "wn-pivotal-trav-init"] {
+        let cell = d.join("results/small/doorkey").join(config);
+        std::fs::create_dir_all(&cell).unwrap();
+        for seed in 0..3 {
+            let name = format!("seed-{seed}.json");
+            std::fs::copy(committed.join(config).join(&name), cell.join(&name)).unwrap();
+        }
+    }
+    ok(&worldgraph(
+        d,
+        &["table", "results", "--out", "out/results.md"],
+    ));
+    let md = std::fs::read_to_string(d.join("out/results.md")).unwrap();
+    let table2 = md
+        .split("## Table 2")
+        .nth(1)
+        .expect("a Table 2 section")
+        .split("\n## ")
+        .next()
+        .unwrap();
+    let head = table2
+        .lines()
+        .find(|l| l.starts_with("| maze |"))
+        .expect("a header");
+    assert!(
+        head.starts_with("| maze | A2C | paper | WN V_all"),
+        "A2C leads the columns: {head}"
+    );
+    let small = table2
+        .lines()
+        .find(|l| l.starts_with("| small"))
+        .expect("a small row");
+    let cells: Vec<&str> = small.split('|').map(str::trim).collect();
+    assert_eq!(
+        (cells[2], cells[3]),
+        ("Fail", "not reported"),
+        "A2C never opened the door; the paper has no figure: {small}"
+    );
+    assert!(
+        small.contains("100 ± 1 | 92 ± 2"),
+        "the full method beside the paper's: {small}"
+    );
+}
