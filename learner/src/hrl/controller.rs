@@ -134,14 +134,10 @@ impl Controller {
     /// environment `e` and returns the count-based bonus `beta / √n`, `n`
     /// the visits so far, this one included (MiniGrid's `PositionBonus`).
     pub(super) fn visit_bonus(&mut self, e: usize, cell: u32, cells: usize, beta: f32) -> f32 {
-        if self.visits.len() != self.envs.len() {
+        if self.visits.is_empty() {
             self.visits = vec![vec![0; cells]; self.envs.len()];
         }
-        let counts = &mut self.visits[e];
-        if counts.len() < cells {
-            counts.resize(cells, 0);
-        }
-        let n = &mut counts[cell as usize];
+        let n = &mut self.visits[e][cell as usize];
         *n += 1;
         beta / (*n as f32).sqrt()
     }
@@ -246,7 +242,10 @@ impl Controller {
         };
         let record: ControllerRecord =
             serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
-        if record.envs.len() != envs || record.queues.len() != envs {
+        if record.envs.len() != envs
+            || record.queues.len() != envs
+            || !(record.visits.is_empty() || record.visits.len() == envs)
+        {
             return Err(bad(format!(
                 "a controller of {} environments, the agent has {}",
                 record.envs.len(),
