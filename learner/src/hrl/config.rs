@@ -160,15 +160,10 @@ pub struct AgentConfig {
     /// How the Worker's actions that `π_g` lacks (Door-Key's pick and open)
     /// start under `π_g` initialisation ([`ObjectActionInit`]).
     pub object_action_init: ObjectActionInit,
-    /// The exit's cell joins the wide-goal candidates `V` (and the world
-    /// graph's nodes), as the task's objects do with `object_goals`: the
-    /// exit ends every task, and the Manager can name it as it names any
-    /// pivotal state. Off, the exit is a narrow goal only, reachable from
-    /// the windows of the candidates near it (on the small Door-Key maze
-    /// from one wide goal in about twenty, at a window's corner, where a
-    /// Manager that had learned to open the door named it in 0.1 % of its
-    /// decisions and never exited).
-    pub exit_candidate: bool,
+    /// Whether the exit's cell joins the wide-goal candidates `V` (and the
+    /// world graph's nodes), as the task's objects do with `object_goals`
+    /// ([`ExitCandidate`]).
+    pub exit_candidate: ExitCandidate,
     /// How the first-layer weights of inputs `π_g` never saw start under
     /// `π_g` initialisation ([`UnseenInputs`]).
     pub unseen_inputs: UnseenInputs,
@@ -183,6 +178,71 @@ pub struct AgentConfig {
     /// as the maze is covered, so the task's optimum is kept; it is never
     /// paid in validation or testing, and never to the Worker. 0: off.
     pub count_bonus: f32,
+}
+
+/// Whether the exit joins the wide-goal candidates `V` (section 4 is
+/// silent: the paper's `V` holds pivotal states, or random or all cells).
+/// Named as a candidate the exit is one Manager decision away through
+/// traversal, and the exit ends every task.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ExitCandidate {
+    /// On a layout with objects to act on (Door-Key) only. There the exit
+    /// lies behind the locked door, and off, it is a narrow goal only,
+    /// reachable from the windows of the candidates near it (on the small
+    /// maze from one wide goal in about twenty, at a window's corner,
+    /// where a Manager that had learned to open the door named it in
+    /// 0.1 % of its decisions and never exited). On the MultiGoal tasks
+    /// the exit's reward is at hand from the first decision, and a Manager
+    /// that can name it learns to exit at once before it learns the balls
+    /// (`docs/experiments.md`, issue 47).
+    #[default]
+    DoorKey,
+    /// On every layout (written `true`).
+    Always,
+    /// Never: `V` as the paper has it (written `false`).
+    Never,
+}
+
+impl ExitCandidate {
+    /// The exit joins `V` on `layout`.
+    pub fn joins(self, layout: &Layout) -> bool {
+        match self {
+            ExitCandidate::Always => true,
+            ExitCandidate::Never => false,
+            ExitCandidate::DoorKey => !layout.object_cells().is_empty(),
+        }
+    }
+}
+
+impl Serialize for ExitCandidate {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            ExitCandidate::DoorKey => s.serialize_str("door-key"),
+            ExitCandidate::Always => s.serialize_bool(true),
+            ExitCandidate::Never => s.serialize_bool(false),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ExitCandidate {
+    /// `true`, `false` (the settings of runs before `door-key`) or
+    /// `"door-key"`.
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Written {
+            Flag(bool),
+            Name(String),
+        }
+        match Written::deserialize(d)? {
+            Written::Flag(true) => Ok(ExitCandidate::Always),
+            Written::Flag(false) => Ok(ExitCandidate::Never),
+            Written::Name(n) if n == "door-key" => Ok(ExitCandidate::DoorKey),
+            Written::Name(n) => Err(serde::de::Error::custom(format!(
+                "exit_candidate {n:?}: expected true, false or \"door-key\""
+            ))),
+        }
+    }
 }
 
 /// How the first-layer weights of the inputs `π_g` never saw in training
@@ -276,7 +336,7 @@ impl Default for AgentConfig {
             worker_task_share: 0.0,
             count_bonus: 0.0,
             object_action_init: ObjectActionInit::default(),
-            exit_candidate: true,
+            exit_candidate: ExitCandidate::default(),
             unseen_inputs: UnseenInputs::default(),
             narrow_plane_init: NarrowPlaneInit::default(),
         }
@@ -351,7 +411,7 @@ impl AgentConfig {
         } else {
             Vec::new()
         };
-        if self.exit_candidate {
+        if self.exit_candidate.joins(layout) {
             v.extend(
                 (0..layout.cells.len() as u32)
                     .filter(|&c| layout.cells[c as usize] == sim::Object::Exit as u8),
@@ -555,8 +615,9 @@ mod tests {
     use super::*;
 
     /// The candidates beyond `V`'s own are the layout's: Door-Key's key and
-    /// locked door with object goals, its exit with the exit candidate, and
-    /// nothing on a maze without them but the exit.
+    /// locked door with object goals, its exit with the exit candidate (by
+    /// default on Door-Key only), and on a maze without objects the exit
+    /// only when it is asked for on every layout.
     #[test]
     fn extra_candidates_are_the_task_objects_and_the_exit_as_set() {
         let dk = sim::Maze::Small.layout(true);
@@ -564,22 +625,47 @@ mod tests {
         let (key, door, exit) = (at(9, 2), at(6, 9), at(11, 11));
         let mut cfg = AgentConfig::default();
         assert_eq!(cfg.extra_candidates(&dk), vec![key, door, exit]);
-        cfg.exit_candidate = false;
+        cfg.exit_candidate = ExitCandidate::Never;
         assert_eq!(cfg.extra_candidates(&dk), vec![key, door]);
-        cfg.exit_candidate = true;
+        cfg.exit_candidate = ExitCandidate::Always;
         cfg.object_goals = false;
         assert_eq!(cfg.extra_candidates(&dk), vec![exit]);
         let plain = sim::Maze::Small.layout(false);
         let plain_exit = plain.cell_index(11, 11) as u32;
-        assert_eq!(
-            AgentConfig::default().extra_candidates(&plain),
-            vec![plain_exit]
-        );
-        let off = AgentConfig {
-            exit_candidate: false,
+        assert!(AgentConfig::default().extra_candidates(&plain).is_empty());
+        let always = AgentConfig {
+            exit_candidate: ExitCandidate::Always,
             ..AgentConfig::default()
         };
-        assert!(off.extra_candidates(&plain).is_empty());
+        assert_eq!(always.extra_candidates(&plain), vec![plain_exit]);
+    }
+
+    /// The exit candidate is written as runs before `door-key` wrote it
+    /// (`true`, `false`), so their summaries still parse and resume; a
+    /// word it does not know is refused, naming what it accepts.
+    #[test]
+    fn the_exit_candidate_reads_the_old_flags_and_door_key() {
+        let read = |v: &str| toml::from_str::<AgentConfig>(&format!("exit_candidate = {v}"));
+        assert_eq!(read("true").unwrap().exit_candidate, ExitCandidate::Always);
+        assert_eq!(read("false").unwrap().exit_candidate, ExitCandidate::Never);
+        assert_eq!(
+            read("\"door-key\"").unwrap().exit_candidate,
+            ExitCandidate::DoorKey
+        );
+        let err = read("\"sometimes\"").unwrap_err().to_string();
+        assert!(err.contains("door-key"), "{err}");
+        for c in [
+            ExitCandidate::DoorKey,
+            ExitCandidate::Always,
+            ExitCandidate::Never,
+        ] {
+            let cfg = AgentConfig {
+                exit_candidate: c,
+                ..AgentConfig::default()
+            };
+            let back: AgentConfig = toml::from_str(&toml::to_string(&cfg).unwrap()).unwrap();
+            assert_eq!(back.exit_candidate, c);
+        }
     }
 
     /// Every configuration a grid can name parses back to itself, carries
