@@ -184,6 +184,43 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
     );
     let rebuilt = f("mean_balls") + f("exit_share") - 0.01 * f("mean_length");
     assert!((rebuilt - f("mean_return")).abs() < 1e-4, "{ep}");
+
+    // The same policy scored under MultiGoal-Sparse's rewards: the same
+    // episodes (the rewards do not steer it), each paying `balls / 5` at the
+    // exit instead of `balls + 1`.
+    let out = ok(&worldgraph(&[
+        "evaluate",
+        a.to_str().unwrap(),
+        "--seeds",
+        "0..5",
+        "--task",
+        "multigoal-sparse",
+        "--json",
+    ]));
+    let s: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(s["task"], "multigoal-sparse");
+    assert_eq!(s["trained_on"], "multigoal");
+    let sp = &s["episodes"];
+    let g = |k: &str| sp[k].as_f64().unwrap();
+    for k in ["mean_length", "mean_balls", "exit_share"] {
+        assert_eq!(g(k), f(k), "{k}: the same episodes\n{ep}\n{sp}");
+    }
+    // Per episode: sparse = dense - balls - exited + exited * balls / 5.
+    let dense_less = f("mean_return") - f("mean_balls") - f("exit_share");
+    assert!(
+        g("mean_return") >= dense_less - 1e-4
+            && g("mean_return") <= dense_less + f("mean_balls") / 5.0 + 1e-4,
+        "{ep}\n{sp}"
+    );
+    assert!((s["score"].as_f64().unwrap() - g("mean_return")).abs() < 1e-4);
+    // Door-Key has other actions and another layout: refused, clearly.
+    let out = worldgraph(&["evaluate", a.to_str().unwrap(), "--task", "doorkey"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--task doorkey") && err.contains("trained on multigoal"),
+        "{err}"
+    );
 }
 
 /// `train` arguments of WN over `V_p` with traversal on the small maze's

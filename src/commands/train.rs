@@ -725,6 +725,13 @@ pub struct EvaluateArgs {
     /// Write a picture of the first episode here.
     #[arg(long)]
     pub picture: Option<PathBuf>,
+    /// Score the agent on another task of its maze with the same actions
+    /// (multigoal, multigoal-sparse, multigoal-stochastic), e.g. how a policy
+    /// trained on dense rewards scores under the sparse ones; the run's own
+    /// task by default. The agent is unchanged: only the environment's
+    /// rewards (and lava) are the other task's.
+    #[arg(long)]
+    pub task: Option<Task>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -767,6 +774,15 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         )
     })?;
     let id = &state.identity;
+    let task = a.task.unwrap_or(id.task);
+    anyhow::ensure!(
+        task == id.task || (task.is_multigoal() && id.task.is_multigoal()),
+        "--task {}: {} was trained on {}, whose actions and layout differ; a run is scored \
+         on another task only among multigoal, multigoal-sparse and multigoal-stochastic",
+        task.name(),
+        a.run.display(),
+        id.task.name()
+    );
     // The budget is in the run's config.toml (the identity holds 0).
     let budget = read_config(&a.run.join("config.toml"))
         .ok()
@@ -784,7 +800,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     // its name (`<maze>-doorkey` for Door-Key).
     let own_layout = a.run.join(LAYOUT_FILE);
     let (layout, env_cfg) = if own_layout.is_file() {
-        train_world(Maze::Small, Some(&own_layout), id.task)?
+        train_world(Maze::Small, Some(&own_layout), task)?
     } else {
         let maze: Maze = id
             .maze
@@ -792,7 +808,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             .unwrap_or(&id.maze)
             .parse()
             .map_err(|e: String| anyhow::anyhow!(e))?;
-        train_world(maze, None, id.task)?
+        train_world(maze, None, task)?
     };
     let mut agent = build_agent(
         &id.config.agent,
@@ -824,7 +840,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             &trace,
             agent.graph(),
             &id.config.agent,
-            id.task,
+            task,
             first,
         )
         .save_png(p)?;
@@ -832,15 +848,20 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     if a.json {
         println!(
             "{}",
-            serde_json::json!({"score": score, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": unfinished.is_none(), "env_steps": state.env_steps, "episodes": episodes})
+            serde_json::json!({"score": score, "task": task.name(), "trained_on": id.task.name(), "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": unfinished.is_none(), "env_steps": state.env_steps, "episodes": episodes})
         );
     } else {
         println!(
-            "{}: score {:.3} on test seeds {} ({} episode(s) per seed){}",
+            "{}: score {:.3} on test seeds {} ({} episode(s) per seed){}{}",
             a.run.display(),
             score,
             a.seeds,
             a.episodes_per_seed,
+            if task == id.task {
+                String::new()
+            } else {
+                format!(" of {} (trained on {})", task.name(), id.task.name())
+            },
             match unfinished {
                 Some(b) => format!(" (unfinished run: {} of {b} env steps)", state.env_steps),
                 None => String::new(),
@@ -851,7 +872,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             episodes.mean_return,
             100.0 * episodes.exit_share,
             episodes.mean_length,
-            if id.task.is_multigoal() {
+            if task.is_multigoal() {
                 format!(", balls collected {:.2}", episodes.mean_balls)
             } else {
                 String::new()
