@@ -147,7 +147,7 @@ fn the_wide_then_narrow_worker_learns_to_reach_the_managers_goals() {
     // often, or more), and with `π_g`'s initialisation on the structure
     // (its unseen ball plane as floor, its goal plane in `g_n`'s) the task
     // return rises within this budget too; with the old initialisation it
-    // did not (docs/implementation_details.md, "Stage 2 findings").
+    // did not (docs/notes/2026-12-01-stage2-findings.md).
     assert!(last > 1.5 * first, "goals reached {first:.3} → {last:.3}");
     assert!(
         after > before + 0.5,

@@ -28,7 +28,7 @@ pub struct DemoArgs {
     pub rounds: u32,
     /// Env-step budget of each stage 2 agent (the default keeps the demo
     /// near five minutes on 2 cores; Wide-then-Narrow's test episodes reach
-    /// the exit only at larger budgets, see docs/experiments.md).
+    /// the exit only at larger budgets, see docs/notes/2026-12-02-stage2-fixes.md).
     #[arg(long, default_value_t = 1_000_000)]
     pub env_steps: u64,
 }

@@ -31,7 +31,7 @@
 //! with these small networks on a CPU the update is compute-bound, so the
 //! recomputation's second forward pass costs more than batching saves,
 //! and the own kernels' GEMM outruns libtorch's at these shapes
-//! (`docs/implementation_details.md`, "Learner throughput").
+//! (`docs/notes/2026-12-01-learner-throughput.md`).
 
 use tch::{Kind, Tensor, nn};
 

@@ -194,7 +194,7 @@ pub enum ExitCandidate {
     /// 0.1 % of its decisions and never exited). On the MultiGoal tasks
     /// the exit's reward is at hand from the first decision, and a Manager
     /// that can name it learns to exit at once before it learns the balls
-    /// (`docs/experiments.md`, issue 47).
+    /// (`docs/notes/2026-12-06-issue-47-door-key-and-sparse.md`).
     #[default]
     DoorKey,
     /// On every layout (written `true`).
