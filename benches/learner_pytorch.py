@@ -394,7 +394,7 @@ class Env:
 
 
 class A2cDriver:
-    """The A2C baseline (``hrl/a2c.rs``)."""
+    """The A2C baseline (``hrl/baseline.rs``)."""
 
     goal_planes = 0
 

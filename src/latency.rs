@@ -161,7 +161,7 @@ impl Latencies {
                 continue;
             }
             let path = dir.join(format!("{}.{}.hgrm", self.role, name));
-            sim::render::write_atomic(&path, percentile_distribution(h).as_bytes())?;
+            sim::atomic_file::write_atomic(&path, percentile_distribution(h).as_bytes())?;
             written.push(path);
             let points = h
                 .iter_quantiles(5)

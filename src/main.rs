@@ -18,15 +18,15 @@ mod chart;
 mod commands;
 mod episode_picture;
 mod latency;
-mod output;
+mod picture_path;
 mod pipeline;
 mod progress;
 mod results;
 mod roles;
 mod shutdown;
-mod stats;
+mod rliable;
 mod update_log;
-mod world;
+mod world_args;
 mod world_graph_picture;
 
 /// worldgraph: learn a graph of a maze's structure (pivotal states and the

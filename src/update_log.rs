@@ -16,7 +16,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use sim::render::write_atomic;
+use sim::atomic_file::write_atomic;
 use syntaxdot_summary::SummaryWriter;
 
 /// The log's CSV file in the run directory.

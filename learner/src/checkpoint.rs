@@ -5,7 +5,7 @@
 //! disk is full, throws a C++ exception that aborts the process with a torn
 //! file behind. Here the weights are serialised into memory
 //! ([`var_store_bytes`], `VarStore::save_to_stream`) and every file is
-//! written with the project's atomic write (`sim::render::write_atomic`:
+//! written with the project's atomic write (`sim::atomic_file::write_atomic`:
 //! write a temporary file, fsync, rename, fsync the directory). A
 //! checkpoint's files are committed together ([`commit`]): they are all
 //! written into a staging directory `<dir>.new` first, which then replaces
@@ -74,7 +74,7 @@ pub fn load_var_store_file(vs: &mut VarStore, path: &Path) -> Result<(), Learner
 /// Writes `bytes` to `path` with the project's atomic write; an error names
 /// `path` and the cause ("No space left on device").
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), LearnerError> {
-    sim::render::write_atomic(path, bytes).map_err(|e| match e {
+    sim::atomic_file::write_atomic(path, bytes).map_err(|e| match e {
         sim::SimError::Io { source, .. } => error(path, source),
         other => error(path, other),
     })

@@ -5,7 +5,7 @@
 //! [`Experience`] books every transition the agent observed during
 //! discovery — pose, action → pose, from its random walks, its path
 //! replays and `π_g`'s episodes — and nothing else: no map is consulted.
-//! World graph discovery runs in a deterministic world (`src/world.rs`),
+//! World graph discovery runs in a deterministic world (the simulator),
 //! so a sequence of observed transitions is a trajectory the agent can
 //! execute again, action for action.
 //!

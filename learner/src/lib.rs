@@ -19,7 +19,7 @@ pub mod error;
 pub mod experience;
 pub mod gcp;
 pub mod hrl;
-pub mod policy;
+pub mod serving_policy;
 pub mod run;
 pub mod seeding;
 pub mod vae;

@@ -29,6 +29,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod atomic_file;
 pub mod batch;
 pub mod env;
 mod error;
@@ -38,6 +39,7 @@ pub mod render;
 pub mod rng;
 pub mod task;
 
+pub use atomic_file::write_atomic;
 pub use batch::{BatchEnv, StepBuffers, StepOut};
 pub use env::{AutoReset, BallSpawn, Env, EnvConfig, EnvState, action, env_seed, minigrid_encode};
 pub use error::SimError;

@@ -4,7 +4,6 @@
 //! (rectangles, discs, lines, triangles) and an atomic PNG writer; the
 //! planner draws the world graph on top of [`draw_grid`]'s maze.
 
-use std::io::Write;
 use std::path::Path;
 
 use shm_schemas::EnvMeta;
@@ -182,42 +181,8 @@ impl Canvas {
             path: path.display().to_string(),
             message,
         })?;
-        write_atomic(path, &bytes)
+        crate::atomic_file::write_atomic(path, &bytes)
     }
-}
-
-/// Writes `bytes` to `path` atomically: a temporary file in the same
-/// directory, fsync, rename. A crash leaves the old file or the new one,
-/// never a torn one.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SimError> {
-    let io = |e: std::io::Error| SimError::Io {
-        path: path.display().to_string(),
-        source: e,
-    };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(io)?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        if let Ok(d) = std::fs::File::open(dir) {
-            let _ = d.sync_all();
-        }
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io)
 }
 
 /// Draws a grid of cell codes with each cell `px` pixels wide, top-left at `(ox, oy)`.

@@ -1,6 +1,6 @@
 //! `table`'s aggregate section and `scores.csv`: the run summaries reported
 //! the way deep RL reports results today (the `rliable` protocol, Agarwal
-//! et al. 2021; the statistics are in [`crate::stats`]).
+//! et al. 2021; the statistics are in [`crate::rliable`]).
 //!
 //! - Per maze and task, every configuration's interquartile mean of the test
 //!   scores over its seeds with a stratified bootstrap 95 % interval.
@@ -17,7 +17,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use crate::results::RunResult;
-use crate::stats::{BOOTSTRAP_REPS, BOOTSTRAP_SEED, Estimate, improvement_interval, iqm_interval};
+use crate::rliable::{BOOTSTRAP_REPS, BOOTSTRAP_SEED, Estimate, improvement_interval, iqm_interval};
 
 /// Confidence level of every interval.
 pub const LEVEL: f64 = 0.95;

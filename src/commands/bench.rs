@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use sim::{BatchEnv, EnvMeta};
 
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// Benchmarks.
 #[derive(Debug, Subcommand)]

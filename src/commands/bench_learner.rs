@@ -22,7 +22,7 @@ use learner::hrl::{AgentConfig, AgentKind, Candidates, HrlAgent, WorldGraphInput
 use serde::Serialize;
 use tch::{Device, Kind, Tensor};
 
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// Which learner to train.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]

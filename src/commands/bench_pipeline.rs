@@ -30,7 +30,7 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
-use learner::policy::{Policy, RandomPolicy};
+use learner::serving_policy::{Policy, RandomPolicy};
 use nix::sys::signal::Signal;
 use serde::Serialize;
 use shm_schemas::EnvMeta;
@@ -42,7 +42,7 @@ use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{OnPeerDeath, RunArgs};
 use crate::shutdown::teardown;
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// `bench pipeline` options.
 #[derive(Debug, Clone, Args)]

@@ -17,7 +17,7 @@ use sim::{Layout, Maze, Task};
 use crate::chart::{LineChart, Series, XScale};
 use crate::pipeline::{Pipeline, Role, world_words};
 use crate::shutdown::teardown;
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 use crate::world_graph_picture::{graph_picture, pivotal_picture};
 
 /// `discover` options.
@@ -270,7 +270,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
             ]
         })
         .collect();
-    sim::render::write_atomic(&pivotal_file, &serde_json::to_vec(&cells)?)?;
+    sim::atomic_file::write_atomic(&pivotal_file, &serde_json::to_vec(&cells)?)?;
     // Edges from random walks (built here, or by the planner process), then
     // each path shortened by π_g where it reaches the next node faster.
     let (graph, refinement) = if a.pipeline {
@@ -283,7 +283,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     graph.save(&dir.join("graph.json"))?;
     // What stage 2 (`worldgraph train --world-graph`) takes besides the
     // graph: π_g's settings and weights.
-    sim::render::write_atomic(
+    sim::atomic_file::write_atomic(
         &dir.join("pi_g.json"),
         &serde_json::to_vec_pretty(disc.gcp().config())?,
     )?;
@@ -344,7 +344,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         edge_weight_shortest: refinement.weight_shortest,
         pivotal_cells: cells,
     };
-    sim::render::write_atomic(
+    sim::atomic_file::write_atomic(
         &dir.join("discovery.json"),
         &serde_json::to_vec_pretty(&summary)?,
     )?;

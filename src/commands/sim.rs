@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 use sim::{AutoReset, BatchEnv, Env, EnvMeta, Object, action, render};
 
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// Simulator tools.
 #[derive(Debug, Subcommand)]
@@ -66,7 +66,7 @@ fn render_cmd(a: RenderArgs) -> anyhow::Result<()> {
     anyhow::ensure!(a.batch >= 1, "--batch must be at least 1");
     anyhow::ensure!((2..=64).contains(&a.cell_px), "--cell-px must be in 2..=64");
     if let Some(path) = &a.png {
-        crate::output::prepare("--png", path)?;
+        crate::picture_path::prepare("--png", path)?;
     }
     let (layout, cfg) = a.world.build()?;
     let (w, h) = (layout.width, layout.height);

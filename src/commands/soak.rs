@@ -37,7 +37,7 @@ use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;
 use crate::roles::{OnPeerDeath, RunArgs};
 use crate::shutdown::{stop_flag, teardown};
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// Growth of a process's resident set above which the soak fails (KiB).
 pub const RSS_GROWTH_LIMIT_KIB: i64 = 16 * 1024;
@@ -392,7 +392,7 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         training,
         ok,
     };
-    sim::render::write_atomic(
+    sim::atomic_file::write_atomic(
         &dir.join("soak.report.json"),
         &serde_json::to_vec_pretty(&report)?,
     )?;

@@ -23,7 +23,7 @@ use std::path::Path;
 use super::soak_report::{KillCost, Recovery, TrainingReport};
 use crate::pipeline::Role;
 use crate::roles::learner_train::{CHECKPOINT_DIR, TRAIN_LOG, open};
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// How long after a kill its training pause is looked for.
 pub const PAUSE_WINDOW_S: f64 = 10.0;

@@ -25,7 +25,7 @@ use learner::run::protocol::{
     self, MAX_EVAL_SEEDS, MAX_TRAIN_SEED, MetricsRow, Observer, RunState, Schedule, TEST_STREAM,
     TestSummary, VALIDATION_STREAM, eval_env,
 };
-use sim::render::write_atomic;
+use sim::atomic_file::write_atomic;
 use sim::{EnvConfig, Layout, Maze, Task};
 
 use crate::chart::{LineChart, Series, XScale};
@@ -184,7 +184,7 @@ fn pipeline_env(
     (crate::pipeline::Pipeline, String),
 )> {
     let run_name = format!("train-{}", std::process::id());
-    let w = crate::world::WorldArgs {
+    let w = crate::world_args::WorldArgs {
         maze: a.maze,
         layout: a.layout.clone(),
         task: a.task,
@@ -757,7 +757,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         "--episodes-per-seed must be at least 1"
     );
     if let Some(path) = &a.picture {
-        crate::output::prepare("--picture", path)?;
+        crate::picture_path::prepare("--picture", path)?;
     }
     if let Some(kind @ RunKind::Discover) = kind_of(&a.run) {
         bail!(
@@ -898,7 +898,7 @@ struct EpisodeFigures {
 
 impl EpisodeFigures {
     /// Adds one round's episodes (sums until [`Self::means`]).
-    fn add(&mut self, r: &learner::hrl::stats::EvalResult) {
+    fn add(&mut self, r: &learner::hrl::reports::EvalResult) {
         self.episodes += r.returns.len();
         self.mean_return += r.returns.iter().map(|&x| f64::from(x)).sum::<f64>();
         self.exit_share += r.success_rate * r.returns.len() as f64;

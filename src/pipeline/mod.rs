@@ -19,7 +19,7 @@ use anyhow::Context;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// A command that runs this very executable, as a child that dies with
 /// this process ([`die_with_parent`]). Every child of `worldgraph` (the

@@ -13,7 +13,7 @@ use super::{Pipeline, Role, world_words};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{OnPeerDeath, RunArgs};
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// `run` options.
 #[derive(Debug, Clone, Args)]

@@ -12,7 +12,7 @@ use clap::Args;
 use iceoryx2::prelude::ipc;
 use learner::a2c::net::ActorCriticConfig;
 use learner::batch_env::{BatchEnvironment, EnvError};
-use learner::policy::{ActorCriticPolicy, Policy, RandomPolicy};
+use learner::serving_policy::{ActorCriticPolicy, Policy, RandomPolicy};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
@@ -26,7 +26,7 @@ use super::{
     EXIT_PEER_DIED, LEARNER_NODE, PLANNER_NODE, PeerWatch, RunArgs, RunCtx, SIM_NODE, config_exit,
 };
 use crate::latency::Latencies;
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// `learner serve` options.
 #[derive(Debug, Clone, Args)]

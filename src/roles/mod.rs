@@ -269,7 +269,7 @@ impl RunCtx {
     /// Writes `value` as pretty JSON to `<run dir>/<name>` atomically.
     pub fn write_json<T: Serialize>(&self, name: &str, value: &T) -> anyhow::Result<()> {
         let bytes = serde_json::to_vec_pretty(value)?;
-        ::sim::render::write_atomic(&self.dir.join(name), &bytes)?;
+        ::sim::atomic_file::write_atomic(&self.dir.join(name), &bytes)?;
         Ok(())
     }
 }

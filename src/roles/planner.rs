@@ -33,7 +33,7 @@ use super::{
     config_exit,
 };
 use crate::latency::Latencies;
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// How the world graph's nodes are chosen.
 #[derive(Debug, Clone, Args)]

@@ -39,7 +39,7 @@ use super::{
     config_exit,
 };
 use crate::latency::{Latencies, Recorder};
-use crate::world::WorldArgs;
+use crate::world_args::WorldArgs;
 
 /// `sim serve` options.
 #[derive(Debug, Clone, Args)]

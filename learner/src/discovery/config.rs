@@ -3,7 +3,7 @@
 //! ([`GoalChains`], [`GoalCurriculum`],
 //! [`DiscoveryConfig::loop_erase_goal_trajectories`],
 //! [`DiscoveryConfig::shortest_known_paths`]), say so; what they do is in
-//! `levers.rs`.
+//! `departures.rs`.
 
 use serde::{Deserialize, Serialize};
 

@@ -33,7 +33,7 @@
 //! - `walks.rs`: step 1's random walks and path replays;
 //! - `buffer.rs`: the latent model's training buffer (held-out share,
 //!   newest kept, batches mixed over the sources);
-//! - `levers.rs`: what the optional research levers do, the settings that
+//! - `departures.rs`: what the optional research levers do, the settings that
 //!   are not the paper's ([`GoalChains`], [`GoalCurriculum`],
 //!   [`DiscoveryConfig::loop_erase_goal_trajectories`],
 //!   [`DiscoveryConfig::shortest_known_paths`]);
@@ -48,7 +48,7 @@ mod buffer;
 mod checkpointing;
 mod config;
 mod config_diff;
-mod levers;
+mod departures;
 mod walks;
 
 use std::collections::BTreeMap;
@@ -201,7 +201,7 @@ impl Discovery {
         // 1. Trajectories: random walks, then π_g rollouts, each one A2C
         // update of π_g (4.) with the curiosity of the latent model as the
         // previous round left it.
-        self.shorten_known_paths(env); // a lever (levers.rs)
+        self.shorten_known_paths(env); // a lever (departures.rs)
         let (walks, mut env_steps) = self.collect_walks(env, &mut rng)?;
         let mut gcp_stats: Vec<GcpStats> = Vec::new();
         for _ in 0..cfg.gcp_iters_per_round {
@@ -220,7 +220,7 @@ impl Discovery {
                 *self.state.visits.entry(s.cell).or_default() += 1;
             }
         }
-        // The levers' share (levers.rs): the agent's experience books π_g's
+        // The levers' share (departures.rs): the agent's experience books π_g's
         // transitions, their loops are erased when asked, and goal chains
         // along the routes the agent knows now join the sources.
         let goal_trajectories = self.goal_trajectories_for_latent(goal_trajectories);

@@ -39,7 +39,7 @@
 //!   evaluation;
 //! - `goals.rs`: goal sampling ([`GoalSampler`]) and the goal episodes of
 //!   a batch (their rewards, ends and recorded trajectories);
-//! - `levers.rs`: the distance of the training goals, which the
+//! - `goal_distance.rs`: the distance of the training goals, which the
 //!   discovery loop's goal curriculum (not the paper's) moves;
 //! - `config.rs`: [`GcpConfig`] and its validation;
 //! - `checkpointing.rs`: the weights, saved and loaded.
@@ -47,7 +47,7 @@
 mod checkpointing;
 mod config;
 mod goals;
-mod levers;
+mod goal_distance;
 
 use rand::SeedableRng;
 use rand::rngs::SmallRng;

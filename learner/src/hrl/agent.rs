@@ -8,7 +8,7 @@
 //! ([`Controller`]). Building it initialises the weights from the seed,
 //! then copies `π_g`'s where configured (section 4.4; [`init`]). Running it
 //! — a batch step, training iterations, evaluation — is in
-//! [`super::run`].
+//! [`super::iteration`].
 
 use std::path::Path;
 

@@ -21,7 +21,7 @@ use super::config::{AgentConfig, AgentKind, Candidates};
 use super::controller::Controller;
 use super::feudal::{Decision, GoalBias, Manager, ManagerHead};
 use super::manager_kernels::{OwnDecision, OwnManager};
-use super::stats::{Decisions, Tracing};
+use super::reports::{Decisions, Tracing};
 use super::wide_narrow::{self, WideNarrowHead, Window};
 use super::worker::WorkerGoal;
 use crate::a2c::input::{BASE_CHANNELS, CellInput, mask};

@@ -38,7 +38,7 @@
 //! ([`HrlAgent::save_controller`]) beside the environments' states, so a
 //! resumed run goes on exactly where it stopped.
 
-pub mod a2c;
+pub mod baseline;
 mod agent;
 pub mod config;
 mod controller;
@@ -46,8 +46,8 @@ pub mod feudal;
 pub mod init;
 mod manager;
 mod manager_kernels;
-mod run;
-pub mod stats;
+mod iteration;
+pub mod reports;
 pub mod steering;
 pub mod traversal;
 pub mod wide_narrow;
@@ -59,7 +59,7 @@ pub use config::{
     WorldGraphInputs,
 };
 pub use controller::SavedController;
-pub use stats::{EpisodeTrace, EvalResult, IterationStats};
+pub use reports::{EpisodeTrace, EvalResult, IterationStats};
 
 #[cfg(test)]
 mod tests;

@@ -175,7 +175,7 @@ impl DiscoveryIdentity {
             }
         }
         let text = toml::to_string(self).context("cannot write the run identity as TOML")?;
-        sim::render::write_atomic(&path, text.as_bytes())
+        sim::atomic_file::write_atomic(&path, text.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
         Ok(())
     }

@@ -18,7 +18,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
-use sim::render::write_atomic;
+use sim::atomic_file::write_atomic;
 use sim::{BatchEnv, EnvConfig, Layout, Object, Task};
 
 use super::config::{RunIdentity, TrainConfig};

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use super::cells::{all_cells, is_done};
 use super::{Job, Plan, discover_command, discovery_done, record, start, tail, train_command};
-use sim::render::write_atomic;
+use sim::atomic_file::write_atomic;
 
 /// Where a cell that is not done stands, as its process last wrote it.
 #[derive(Debug, Clone, Serialize, Deserialize)]

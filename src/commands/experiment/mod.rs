@@ -21,7 +21,7 @@ use std::process::{Child, Command, Stdio};
 
 use anyhow::Context;
 use clap::Args;
-use sim::render::write_atomic;
+use sim::atomic_file::write_atomic;
 use sim::{Maze, Task};
 
 use learner::a2c::rollout::GradPath;

@@ -449,7 +449,7 @@ fn submit_array(
     ] {
         std::fs::create_dir_all(&d).with_context(|| format!("cannot create {}", d.display()))?;
     }
-    sim::render::write_atomic(&script, script_text.as_bytes())?;
+    sim::atomic_file::write_atomic(&script, script_text.as_bytes())?;
     let out = slurm_command("sbatch", &args)?.map_err(|message| SlurmError::Refused {
         script: script.clone(),
         message,

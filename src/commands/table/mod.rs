@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use crate::chart::{Band, LineChart, XScale, band_chart};
 use anyhow::Context;
 use clap::Args;
-use sim::render::write_atomic;
+use sim::atomic_file::write_atomic;
 
 use crate::results::{RunResult, read_all_runs};
 

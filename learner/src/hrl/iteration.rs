@@ -25,11 +25,11 @@
 
 use sim::action;
 
-use super::a2c;
+use super::baseline;
 use super::agent::{EVAL_SALT, HrlAgent};
 use super::config::HandOver;
 use super::controller::Controller;
-use super::stats::{EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, reached_exit};
+use super::reports::{EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, reached_exit};
 use super::steering::Leg;
 use super::traversal::{self, Execution, Traversal};
 use super::worker::{Arrival, EpisodeEnd, WorkerStep};
@@ -193,7 +193,7 @@ impl HrlAgent {
                 0.0
             };
             if self.manager.is_none() {
-                (book.rewards[e], book.dones[e]) = a2c::task_step(m);
+                (book.rewards[e], book.dones[e]) = baseline::task_step(m);
                 book.rewards[e] += bonus;
                 if m.truncated() {
                     book.cut_worker.push(e);
