@@ -19,9 +19,10 @@ pub mod error;
 pub mod experience;
 pub mod gcp;
 pub mod hrl;
-pub mod serving_policy;
+pub mod identity;
 pub mod run;
 pub mod seeding;
+pub mod serving_policy;
 pub mod vae;
 
 pub use error::{ConfigError, LearnerError};

@@ -17,7 +17,9 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use crate::results::RunResult;
-use crate::rliable::{BOOTSTRAP_REPS, BOOTSTRAP_SEED, Estimate, improvement_interval, iqm_interval};
+use crate::rliable::{
+    BOOTSTRAP_REPS, BOOTSTRAP_SEED, Estimate, improvement_interval, iqm_interval,
+};
 
 /// Confidence level of every interval.
 pub const LEVEL: f64 = 0.95;

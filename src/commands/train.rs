@@ -17,13 +17,13 @@ use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::hrl::{AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, IterationStats};
 use learner::run::artefact::{build_agent, check_world_graph_layout};
 use learner::run::config::{
-    RunIdentity, TrainConfig, auto_values, check_budget, config_with_overrides, read_config,
-    resolve_auto, trained_env_steps,
+    MAX_EVAL_SEEDS, RunIdentity, TrainConfig, auto_values, check_budget, config_with_overrides,
+    read_config, resolve_auto, trained_env_steps,
 };
 use learner::run::dir::{RunKind, check, describe, kind_of, lock, name_in, record_invocation};
 use learner::run::protocol::{
-    self, MAX_EVAL_SEEDS, MAX_TRAIN_SEED, MetricsRow, Observer, RunState, Schedule, TEST_STREAM,
-    TestSummary, VALIDATION_STREAM, eval_env,
+    self, MAX_TRAIN_SEED, MetricsRow, Observer, RunState, Schedule, TEST_STREAM, TestSummary,
+    VALIDATION_STREAM, eval_env,
 };
 use sim::atomic_file::write_atomic;
 use sim::{EnvConfig, Layout, Maze, Task};

@@ -100,7 +100,7 @@ impl TrainState {
     /// run (its progress aside): `maze is "small" in the checkpoint,
     /// "medium" now`.
     fn difference(&self, now: &TrainState) -> Option<String> {
-        learner::run::identity::differences(self, now, &["iterations", "env_steps"])
+        learner::identity::differences(self, now, &["iterations", "env_steps"])
             .into_iter()
             .next()
             .map(|d| {

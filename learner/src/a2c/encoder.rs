@@ -21,7 +21,7 @@ use tch::{Kind, Tensor};
 use super::input::CellInput;
 use super::kernels::{DenseRelu, FirstConv, StridedConv};
 use super::net::Trunk;
-use super::rollout::floats;
+use super::tensors::floats;
 
 /// The encoder's weights in the kernels' layouts, and the activations of
 /// the observations encoded since the last [`RustEncoder::load`].

@@ -36,6 +36,7 @@ pub mod net;
 pub mod optim;
 pub mod rollout;
 pub mod rust_net;
+pub mod tensors;
 
 use std::time::Instant;
 

@@ -40,6 +40,7 @@ pub use super::grad_path::GradPath;
 use super::input::{CellInput, GoalMarks, encode_obs, goal_planes};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
 use super::rust_net::RustActorCritic;
+use super::tensors::floats;
 use super::{A2cConfig, Categorical, LossFigures, PhaseTimes, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
 
@@ -460,12 +461,6 @@ pub fn bootstrap_truncated(
     for (&e, v) in envs.iter().zip(final_values(net, obs, goals, state, envs)) {
         rewards[e] += gamma as f32 * v;
     }
-}
-
-/// The values of a float tensor.
-pub fn floats(t: &Tensor) -> Vec<f32> {
-    Vec::<f32>::try_from(&t.to_kind(Kind::Float).contiguous().flatten(0, -1))
-        .expect("invariant: a float tensor converts to Vec<f32>")
 }
 
 #[cfg(test)]

@@ -30,7 +30,7 @@ use super::encoder::{RustEncoder, with_gradients};
 use super::input::CellInput;
 use super::lstm::{Heads, LstmCell, Sequence, transposed};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState, Trunk};
-use super::rollout::floats;
+use super::tensors::floats;
 
 /// The network's weights in the kernels' layouts and the activations of
 /// the steps taken since the last [`RustActorCritic::load`].

@@ -8,7 +8,7 @@ use super::DiscoveryConfig;
 /// `saved` differs from this run's `now`, budget fields (`max_rounds`,
 /// `patience`) aside: "config field gcp.lr is 0.001 in the checkpoint, 0.002 now".
 pub fn config_difference(saved: &DiscoveryConfig, now: &DiscoveryConfig) -> Option<String> {
-    crate::run::identity::differences(saved, now, &["max_rounds", "patience"])
+    crate::identity::differences(saved, now, &["max_rounds", "patience"])
         .into_iter()
         .next()
         .map(|d| {

@@ -46,8 +46,8 @@
 
 mod checkpointing;
 mod config;
-mod goals;
 mod goal_distance;
+mod goals;
 
 use rand::SeedableRng;
 use rand::rngs::SmallRng;

@@ -28,12 +28,11 @@
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
-use super::manager_kernels::OwnManager;
 use super::wide_narrow::{WINDOW_CHANNELS, WideNarrowHead, Window};
 use crate::a2c::encoder::with_gradients;
 use crate::a2c::input::CellInput;
 use crate::a2c::net::{LstmState, Trunk};
-use crate::a2c::rollout::floats;
+use crate::a2c::tensors::floats;
 use crate::a2c::{A2cConfig, Categorical, LossFigures, PolicyTerms, a2c_loss, advantages};
 use crate::batch_env::ObsView;
 
@@ -55,6 +54,29 @@ pub fn interval_transition(
         (true, None) => (sum, 0.0),
         (false, _) => (sum, gk),
     }
+}
+
+/// The Manager's trunk run outside tch's autograd (the
+/// [`crate::a2c::rollout::GradPath::RustCore`] path): the update's forward
+/// over the `K·B` decisions, and its backward from the gradients of the
+/// hidden states. Implemented by the own kernels
+/// (`manager_kernels::OwnManager`); [`Manager::loss_with`] takes it.
+pub(super) trait OwnTrunk {
+    /// The hidden and cell states after every row (`[K·B, hidden]` each) of
+    /// `input`, from `init_h`, `init_c`, zeroed before row `i` where
+    /// `reset[i]`.
+    fn unroll(
+        &mut self,
+        input: &CellInput,
+        init_h: &[f32],
+        init_c: &[f32],
+        reset: &[bool],
+        b: usize,
+    ) -> (Vec<f32>, Vec<f32>);
+    /// The gradients of the trunk's weights (encoder, then core) from
+    /// `dh`, the gradient of the loss in every hidden state of the last
+    /// [`Self::unroll`].
+    fn unroll_backward(&mut self, dh: &[f32], b: usize) -> Vec<Tensor>;
 }
 
 /// The Manager's goal head.
@@ -474,7 +496,7 @@ impl Manager {
         init: &LstmState,
         cfg: &A2cConfig,
         gamma: f64,
-        mut own: Option<&mut OwnManager>,
+        mut own: Option<&mut dyn OwnTrunk>,
     ) -> ManagerLoss {
         let b = queues.len();
         let k_max = queues

@@ -25,8 +25,8 @@
 
 use sim::action;
 
-use super::baseline;
 use super::agent::{EVAL_SALT, HrlAgent};
+use super::baseline;
 use super::config::HandOver;
 use super::controller::Controller;
 use super::reports::{EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, reached_exit};

@@ -19,7 +19,7 @@ use tch::{Tensor, nn};
 
 use super::config::{AgentConfig, AgentKind, Candidates};
 use super::controller::Controller;
-use super::feudal::{Decision, GoalBias, Manager, ManagerHead};
+use super::feudal::{Decision, GoalBias, Manager, ManagerHead, OwnTrunk};
 use super::manager_kernels::{OwnDecision, OwnManager};
 use super::reports::{Decisions, Tracing};
 use super::wide_narrow::{self, WideNarrowHead, Window};
@@ -27,7 +27,8 @@ use super::worker::WorkerGoal;
 use crate::a2c::input::{BASE_CHANNELS, CellInput, mask};
 use crate::a2c::net::{LstmState, Trunk};
 use crate::a2c::optim::Adam;
-use crate::a2c::rollout::{GradPath, floats};
+use crate::a2c::rollout::GradPath;
+use crate::a2c::tensors::floats;
 use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
 use crate::batch_env::ObsView;
 
@@ -450,7 +451,9 @@ impl ManagerSide {
             &init,
             cfg,
             cfg.gamma,
-            own.as_mut().filter(|_| own_path),
+            own.as_mut()
+                .filter(|_| own_path)
+                .map(|o| o as &mut dyn OwnTrunk),
         );
         let t1 = PhaseTimes::lap(&mut times.loss, t0);
         if l.figures.entries > 0.0 {

@@ -22,15 +22,15 @@
 
 use tch::nn;
 
-use super::feudal::{Manager, ManagerHead};
+use super::feudal::{Manager, ManagerHead, OwnTrunk};
 use crate::a2c::MASKED_LOGIT;
 use crate::a2c::encoder::RustEncoder;
 use crate::a2c::gemm::{Mat, matmul, transposed};
 use crate::a2c::input::CellInput;
 use crate::a2c::kernels::FirstConv;
 use crate::a2c::lstm::{LstmCell, Sequence};
-use crate::a2c::rollout::floats;
 use crate::a2c::rust_net::{CoreWeights, trunk_backward};
+use crate::a2c::tensors::floats;
 
 /// A linear layer as the forward reads it: the weight transposed `[in,
 /// out]` and the bias.
@@ -512,6 +512,23 @@ impl OwnManager {
     }
 }
 
+impl OwnTrunk for OwnManager {
+    fn unroll(
+        &mut self,
+        input: &CellInput,
+        init_h: &[f32],
+        init_c: &[f32],
+        reset: &[bool],
+        b: usize,
+    ) -> (Vec<f32>, Vec<f32>) {
+        OwnManager::unroll(self, input, init_h, init_c, reset, b)
+    }
+
+    fn unroll_backward(&mut self, dh: &[f32], b: usize) -> Vec<tch::Tensor> {
+        OwnManager::unroll_backward(self, dh, b)
+    }
+}
+
 /// `log Σ eˣ` of `x`, as tch computes it (the maximum taken out first).
 fn logsumexp(x: &[f32]) -> f32 {
     let m = x.iter().copied().fold(f32::NEG_INFINITY, f32::max);
@@ -736,7 +753,7 @@ mod tests {
             &init,
             &crate::a2c::A2cConfig::default(),
             0.99,
-            own.then_some(&mut kernels),
+            own.then_some(&mut kernels as &mut dyn OwnTrunk),
         );
         let mut vars = side.vs.variables().into_iter().collect::<Vec<_>>();
         vars.sort_by(|a, b| a.0.cmp(&b.0));

@@ -38,15 +38,15 @@
 //! ([`HrlAgent::save_controller`]) beside the environments' states, so a
 //! resumed run goes on exactly where it stopped.
 
-pub mod baseline;
 mod agent;
+pub mod baseline;
 pub mod config;
 mod controller;
 pub mod feudal;
 pub mod init;
+mod iteration;
 mod manager;
 mod manager_kernels;
-mod iteration;
 pub mod reports;
 pub mod steering;
 pub mod traversal;

@@ -174,7 +174,7 @@ fn the_manager_decides_for_every_environment_on_the_first_step() {
     let mut env = corridors(n, 100);
     let mut ctl = agent.controller(n, 11);
     agent.worker.rollout.start(&ctl.worker_state);
-    let mut counts = stats::StepCounts::default();
+    let mut counts = reports::StepCounts::default();
     agent
         .step_batch(&mut ctl, &mut env, true, None, &mut counts)
         .expect("step");
@@ -216,7 +216,7 @@ fn the_workers_goal_marks_land_on_the_goal_cells() {
         let mut ctl = agent.controller(n, 11);
         let (wide, narrow) = (at(6, 1), at(5, 1));
         hand_goals(&mut ctl, wide, narrow, at(1, 1));
-        let mut counts = stats::StepCounts::default();
+        let mut counts = reports::StepCounts::default();
         agent
             .step_batch(&mut ctl, &mut env, false, None, &mut counts)
             .expect("step");
@@ -260,7 +260,7 @@ fn an_environment_whose_episode_ends_gets_a_fresh_decision_next_step() {
     let mut ctl = agent.controller(n, 11);
     agent.worker.rollout.start(&ctl.worker_state);
     hand_goals(&mut ctl, at(6, 1), at(6, 1), at(1, 1));
-    let mut counts = stats::StepCounts::default();
+    let mut counts = reports::StepCounts::default();
     agent
         .step_batch(&mut ctl, &mut env, true, None, &mut counts)
         .expect("step");
@@ -315,7 +315,7 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
     agent.worker.rollout.start(&ctl.worker_state);
     // The agent stands on a node with a route to g_w: it traverses.
     hand_goals(&mut ctl, at(4, 1), at(5, 1), at(1, 1));
-    let mut counts = stats::StepCounts::default();
+    let mut counts = reports::StepCounts::default();
     for step in 1..=3 {
         agent
             .step_batch(&mut ctl, &mut env, true, None, &mut counts)
@@ -356,7 +356,7 @@ fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpo
     let mut env = corridors(n, 100);
     let mut ctl = agent.controller(n, 11);
     agent.worker.rollout.start(&ctl.worker_state);
-    let mut counts = stats::StepCounts::default();
+    let mut counts = reports::StepCounts::default();
     let mut visits = vec![std::collections::HashMap::<u32, u32>::new(); n];
     let mut expected = vec![0f32; n];
     for _ in 0..12 {

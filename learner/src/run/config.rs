@@ -8,9 +8,12 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use sim::Task;
 
-use super::protocol::MAX_EVAL_SEEDS;
 use crate::hrl::{AgentConfig, AgentKind, HrlAgent};
 use sim::Layout;
+
+/// The most seeds one evaluation steps side by side (`evaluate --seeds`,
+/// `validation_seeds`, `test_seeds`): each is an environment of one batch.
+pub const MAX_EVAL_SEEDS: u64 = 10_000;
 
 /// Everything `train` is configured by (the run's `config.toml`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -60,7 +63,7 @@ impl RunIdentity {
     /// Every field in which this saved identity differs from `now`, in
     /// words: `config.agent.horizon: 20 there, 15 here; ...`.
     pub fn differences(&self, now: &RunIdentity) -> String {
-        super::identity::describe(&super::identity::differences(self, now, &[]))
+        crate::identity::describe(&crate::identity::differences(self, now, &[]))
     }
 }
 

@@ -3,8 +3,9 @@
 //!
 //! - [`config`]: a training run's settings (`config.toml`), `--config` and
 //!   `--set`, the budget it trains, and its identity.
-//! - [`identity`]: the one comparison of a saved run record with this
-//!   run's, used by every resumable run.
+//! - [`crate::identity`] (beside this module, as the discovery loop's
+//!   checkpoint uses it too): the one comparison of a saved run record
+//!   with this run's.
 //! - [`dir`]: a run directory: what kind of run it holds, its lock, its
 //!   record of invocations.
 //! - [`artefact`]: the discovery run as stage 1's artefact, and the
@@ -16,5 +17,4 @@
 pub mod artefact;
 pub mod config;
 pub mod dir;
-pub mod identity;
 pub mod protocol;

@@ -34,9 +34,6 @@ pub const TEST_STREAM: u64 = 2_000_003;
 /// Training seeds are below this (so their streams `(seed, i)` never meet
 /// the validation and test streams).
 pub const MAX_TRAIN_SEED: u64 = 1_000_000;
-/// The most seeds one evaluation steps side by side (`evaluate --seeds`,
-/// `validation_seeds`, `test_seeds`): each is an environment of one batch.
-pub const MAX_EVAL_SEEDS: u64 = 10_000;
 
 /// One row of `metrics.csv` (one segment).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]

@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use learner::hrl::{AgentConfig, AgentKind};
+use learner::run::config::MAX_EVAL_SEEDS;
 use learner::run::config::TrainConfig;
-use learner::run::protocol::{MAX_EVAL_SEEDS, MAX_TRAIN_SEED};
+use learner::run::protocol::MAX_TRAIN_SEED;
 use serde::{Deserialize, Serialize};
 use sim::{Maze, Task};
 
