@@ -51,8 +51,6 @@ Environment:
   WORLDGRAPH_TORCH_THREADS  libtorch's intra-op threads of this process [default: 1]
   WORLDGRAPH_LOG            the log filter, tracing's EnvFilter syntax (e.g. debug, learner=debug) [default: info]
   WORLDGRAPH_CACHE          where scripts/setup-libtorch.sh keeps libtorch [default: ~/.cache/worldgraph]
-  WORLDGRAPH_FIRST_LAYER    dense: the plain first convolution instead of gather-and-sum (measurements)
-  WORLDGRAPH_GRAD_PATH      the learners' gradient path (bench learner's fast one): rust-core, rust-encoder, per-step, recompute or plain [default: rust-core]
   WORLDGRAPH_PYTHON         bench learner's Python for the PyTorch reference [default: .venv/bin/python, else python3]";
 
 #[derive(Debug, Subcommand)]

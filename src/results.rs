@@ -92,7 +92,8 @@ pub struct RunResult {
     pub jobs: usize,
     /// The commit the binary that ran it was built from ([`build_commit`]).
     pub commit: String,
-    /// The learners' gradient path (`WORLDGRAPH_GRAD_PATH`): the same
+    /// The learners' gradient path (`agent.grad_path`, `gcp.grad_path`; up
+    /// to this version the `WORLDGRAPH_GRAD_PATH` variable): the same
     /// function in another float order, so a rerun reproduces bit for bit
     /// only on the same path ([`grad_path_before_recorded`] where absent).
     #[serde(default = "grad_path_before_recorded")]

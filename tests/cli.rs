@@ -579,8 +579,6 @@ fn help_lists_the_environment_variables_the_commands_read() {
         "WORLDGRAPH_TORCH_THREADS",
         "WORLDGRAPH_LOG",
         "WORLDGRAPH_CACHE",
-        "WORLDGRAPH_FIRST_LAYER",
-        "WORLDGRAPH_GRAD_PATH",
         "WORLDGRAPH_PYTHON",
     ] {
         assert!(help.contains(var), "{var} is not in --help:\n{help}");

@@ -1,9 +1,8 @@
 //! `worldgraph bench learner`: training throughput of a learner (env-steps
 //! per second of rollout + update), where an iteration's time goes, and the
-//! same updates through the other gradient paths (the per-step tch path,
-//! the encoder in the own kernels, the plain path: dense first convolution,
-//! autograd at every rollout step) measured in alternating windows of the
-//! same run.
+//! same updates on the reference gradient path (`tch`: autograd at every
+//! rollout step) measured in alternating windows of the same run, the
+//! baseline of the production path's (`rust-core`) speed-up.
 //! Also the model's FLOPs per env-step against a dense matrix product's
 //! GFLOP/s on the same threads, and, after the Rust windows, the PyTorch
 //! reference of the same networks and update (`benches/learner_pytorch.py`,
@@ -72,7 +71,7 @@ pub struct BenchLearnerArgs {
     #[arg(long)]
     pub kernel_threads: Option<usize>,
     /// Seconds of measurement in total, split into alternating windows of
-    /// the fast and the plain path (the PyTorch reference then gets as
+    /// the fast (`rust-core`) and the `tch` path (the PyTorch reference then gets as
     /// many, split among its variants).
     #[arg(long, default_value_t = 12.0)]
     pub seconds: f64,
@@ -125,17 +124,14 @@ pub struct PhaseShares {
 /// One gradient path's figures in the alternating windows.
 #[derive(Debug, Clone, Serialize)]
 pub struct NamedPath {
-    /// `GradPath::name` (`per-step`, `rust-encoder`, `rust-core`, `plain`,
-    /// `recompute`).
+    /// `GradPath::name` (`rust-core`, `tch`).
     pub path: String,
-    /// Whether it is the fast path (the learners' default).
+    /// Whether it is the fast path (the learners' production path).
     pub fast: bool,
     /// Its figures.
     pub figures: PathFigures,
-    /// Its env-steps/s over the plain path's, median of the windows.
-    pub over_plain: f64,
-    /// Its env-steps/s over the per-step path's, median of the windows.
-    pub over_per_step: f64,
+    /// Its env-steps/s over the tch reference's, median of the windows.
+    pub over_tch: f64,
 }
 
 /// `bench learner`'s report.
@@ -153,15 +149,15 @@ pub struct LearnerBenchReport {
     pub rollout: usize,
     /// libtorch threads.
     pub threads: i32,
-    /// The fast path (embedding-bag first layer, no_grad acting, batched
-    /// recomputation).
+    /// The production path (`rust-core`: the whole network in the
+    /// project's own kernels).
     pub fast: PathFigures,
-    /// The plain path (dense first layer, autograd at every step).
-    pub plain: PathFigures,
-    /// Fast over plain env-steps/s, median of the paired windows.
+    /// The reference path (`tch`: autograd at every step).
+    pub tch: PathFigures,
+    /// Fast over tch env-steps/s, median of the paired windows.
     pub speedup: f64,
-    /// Every path measured (the fast one, `per-step`, `rust-encoder`,
-    /// `plain`), with its ratios to the plain and the per-step path.
+    /// Every path measured (the fast one, then `tch`), with its ratio to
+    /// the tch path.
     pub paths: Vec<NamedPath>,
     /// Dense matrix product GFLOP/s on the same threads (the compute bound).
     pub matmul_gflops: f64,
@@ -229,13 +225,13 @@ impl Learner {
             Learner::Hrl(a) => a.take_times(),
         }
     }
-    fn flops(&self, path: GradPath) -> f64 {
+    fn flops(&self) -> f64 {
         match self {
             Learner::Gcp(g) => {
                 let net = g.network();
-                learner::a2c::net::flops_per_env_step(net.trunk(), net.config().num_actions, path)
+                learner::a2c::net::flops_per_env_step(net.trunk(), net.config().num_actions)
             }
-            Learner::Hrl(a) => a.flops_per_env_step(path),
+            Learner::Hrl(a) => a.flops_per_env_step(),
         }
     }
 }
@@ -296,28 +292,10 @@ fn build(
     Ok((learner, env))
 }
 
-/// The path measured as "fast": the learners' default (which
-/// `WORLDGRAPH_GRAD_PATH` can name).
-fn fast_path() -> GradPath {
-    GradPath::default()
-}
-
-/// The paths measured: the fast one, then the per-step tch path, the
-/// own-kernel encoder and the own-kernel network where the fast one is
-/// none of them, then the plain path.
+/// The paths measured: the production one ("fast"), then the tch
+/// reference.
 fn measured_paths() -> Vec<GradPath> {
-    let mut paths = vec![fast_path()];
-    for p in [
-        GradPath::PerStep,
-        GradPath::RustEncoder,
-        GradPath::RustCore,
-        GradPath::Plain,
-    ] {
-        if !paths.contains(&p) {
-            paths.push(p);
-        }
-    }
-    paths
+    vec![GradPath::RustCore, GradPath::Tch]
 }
 
 /// Dense `n × n` matrix products on the current threads: GFLOP/s.
@@ -407,7 +385,7 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
     let gflops = matmul_gflops(1.0);
     let figures = |i: usize| {
         let rate = median(rates[i].clone());
-        let flops = learners[i].0.flops(paths[i]);
+        let flops = learners[i].0.flops();
         PathFigures {
             env_steps_per_sec: rate,
             env_steps: steps[i],
@@ -427,19 +405,18 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         )
     };
     let index = |p: GradPath| paths.iter().position(|&q| q == p).expect("measured");
-    let (plain_i, per_step_i) = (index(GradPath::Plain), index(GradPath::PerStep));
+    let tch_i = index(GradPath::Tch);
     let named: Vec<NamedPath> = (0..k)
         .map(|i| NamedPath {
             path: paths[i].name().to_string(),
             fast: i == 0,
             figures: figures(i),
-            over_plain: ratio(i, plain_i),
-            over_per_step: ratio(i, per_step_i),
+            over_tch: ratio(i, tch_i),
         })
         .collect();
     let fast_fig = figures(0);
-    let plain_fig = figures(plain_i);
-    let speedup = ratio(0, plain_i);
+    let tch_fig = figures(tch_i);
+    let speedup = ratio(0, tch_i);
     let fast = &learners[0].0;
     let (layout, env_cfg) = a.world.build()?;
     let decisions_per_step = fast_decisions as f64 / steps[0].max(1) as f64;
@@ -458,7 +435,7 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         threads: a.threads,
         share_of_bound: fast_fig.achieved_gflops / gflops.max(1e-9),
         fast: fast_fig,
-        plain: plain_fig,
+        tch: tch_fig,
         speedup,
         paths: named,
         matmul_gflops: gflops,
@@ -712,24 +689,8 @@ fn print_table(r: &LearnerBenchReport) {
             f.achieved_gflops
         );
     }
-    let ratios: Vec<String> = r
-        .paths
-        .iter()
-        .filter(|n| n.path != "plain")
-        .map(|n| format!("{}/plain {:.2}×", n.path, n.over_plain))
-        .chain(
-            r.paths
-                .iter()
-                .filter(|n| n.path != "plain" && n.path != "per-step")
-                .map(|n| format!("{}/per-step {:.2}×", n.path, n.over_per_step)),
-        )
-        .collect();
     println!(
-        "{} (medians over windows run back to back)",
-        ratios.join(", ")
-    );
-    println!(
-        "speedup fast/plain {:.2}× (median of paired windows); matmul bound {:.1} GFLOP/s, fast path at {:.1} % of it",
+        "speedup fast/tch {:.2}× (median of paired windows); matmul bound {:.1} GFLOP/s, fast path at {:.1} % of it",
         r.speedup,
         r.matmul_gflops,
         100.0 * r.share_of_bound

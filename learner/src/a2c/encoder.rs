@@ -1,20 +1,15 @@
-//! The trunk's encoder run by the own kernels ([`crate::a2c::kernels`])
-//! around tch's autograd graph: the path [`GradPath::RustEncoder`].
+//! The trunk's encoder run by the own kernels ([`crate::a2c::kernels`]),
+//! the first part of the production gradient path (`rust-core`,
+//! [`crate::a2c::rust_net`]).
 //!
-//! tch cannot call a Rust function as an autograd op, so the encoder runs
-//! outside the graph. While acting, each step's observations go through
-//! the first convolution, the stride-2 convolution and the linear layer
-//! here; the features enter tch as a leaf that requires its gradient, and
-//! the core and heads build the step's graph on it as on the other paths.
-//! Every activation is kept: the weights do not change within a rollout
-//! (the update comes after it), so they are exactly those the update's
-//! backward needs, and nothing is recomputed. The update back-propagates
-//! the loss to the leaves and to the core's and heads' parameters in one
-//! pass, runs the encoder's backward over all `T·B` observations at once
-//! (three large GEMMs per layer instead of `T` small ones) and hands every
-//! gradient to the caller's optimiser through [`with_gradients`].
-//!
-//! [`GradPath::RustEncoder`]: crate::a2c::rollout::GradPath::RustEncoder
+//! While acting, each step's observations go through the first
+//! convolution, the stride-2 convolution and the linear layer here. Every
+//! activation is kept: the weights do not change within a rollout (the
+//! update comes after it), so they are exactly those the update's backward
+//! needs, and nothing is recomputed. The update runs the encoder's backward
+//! over all `T·B` observations at once (three large GEMMs per layer instead
+//! of `T` small ones); [`with_gradients`] hands gradients computed outside
+//! tch's autograd to the caller's optimiser.
 
 use tch::{Kind, Tensor};
 

@@ -21,7 +21,6 @@ use serde::{Deserialize, Serialize};
 use tch::nn::{self, Module};
 use tch::{Device, Kind, Tensor};
 
-use super::grad_path::GradPath;
 use super::input::{BASE_CHANNELS, CellInput, FirstLayer, first_conv};
 
 /// Sizes of an actor-critic (CPU-sized defaults).
@@ -272,7 +271,7 @@ impl Trunk {
             input,
             &self.conv1.ws,
             self.conv1.bs.as_ref(),
-            first_layer(),
+            FirstLayer::Gather,
         ))
     }
 
@@ -452,18 +451,6 @@ impl ActorCritic {
     }
 }
 
-/// The first layer's implementation: [`FirstLayer::Gather`], or dense when
-/// `WORLDGRAPH_FIRST_LAYER=dense` (for measurements).
-pub fn first_layer() -> FirstLayer {
-    static LAYER: std::sync::OnceLock<FirstLayer> = std::sync::OnceLock::new();
-    *LAYER.get_or_init(
-        || match std::env::var("WORLDGRAPH_FIRST_LAYER").as_deref() {
-            Ok("dense") => FirstLayer::Dense,
-            _ => FirstLayer::Gather,
-        },
-    )
-}
-
 /// Multiply-adds of one trunk forward pass per observation, by layer:
 /// `(first convolution dense, rest)`; with `bag` (mean table rows per
 /// output position) the first convolution's fast-path additions instead.
@@ -488,30 +475,16 @@ pub fn trunk_macs(trunk: &Trunk, bag: Option<f64>) -> (f64, f64) {
 }
 
 /// Model FLOPs per env-step of an every-step learner with `heads` outputs
-/// (policy + value): on the recompute path the acting forward, the update's
-/// forward and the backward pass (twice the forward, except the first
-/// convolution, which needs no input gradient); on the per-step path one
-/// forward with its backward. Table rows of the fast first layer count one
-/// FLOP each (an addition), a multiply-add two.
-pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64, path: GradPath) -> f64 {
+/// (policy + value): one forward with its backward (twice the forward,
+/// except the first convolution, which needs no input gradient). Table rows
+/// of the gather-and-sum first layer count one FLOP each (an addition), a
+/// multiply-add two. The same on both gradient paths: they compute the same
+/// values.
+pub fn flops_per_env_step(trunk: &Trunk, num_actions: i64) -> f64 {
     let heads = trunk.hidden as f64 * (num_actions as f64 + 1.0);
-    match path {
-        GradPath::Recompute => {
-            // Ten table rows per position (nine taps, and the agent's,
-            // goals' and key's few).
-            let (c1, rest) = trunk_macs(trunk, Some(10.0));
-            let fwd = 2.0 * (c1 + rest + heads);
-            2.0 * fwd + 2.0 * c1 + 4.0 * (rest + heads)
-        }
-        GradPath::PerStep | GradPath::RustEncoder | GradPath::RustCore => {
-            let (c1, rest) = trunk_macs(trunk, Some(10.0));
-            let fwd = 2.0 * (c1 + rest + heads);
-            fwd + 2.0 * c1 + 4.0 * (rest + heads)
-        }
-        GradPath::Plain => {
-            let (c1, rest) = trunk_macs(trunk, None);
-            let fwd = 2.0 * (c1 + rest + heads);
-            fwd + 2.0 * c1 + 4.0 * (rest + heads)
-        }
-    }
+    // Ten table rows per position (nine taps, and the agent's, goals' and
+    // key's few).
+    let (c1, rest) = trunk_macs(trunk, Some(10.0));
+    let fwd = 2.0 * (c1 + rest + heads);
+    fwd + 2.0 * c1 + 4.0 * (rest + heads)
 }

@@ -3,41 +3,27 @@
 //!
 //! A rollout holds `T` steps of `B` environments, entry `t·B + b`, plus the
 //! core state it started from and the bootstrap values `V(s_T)` `[B]` (the
-//! `+1` of CleanRL's `[T + 1, B]` layout). Three ways to fill it, chosen by
-//! [`GradPath`]:
+//! `+1` of CleanRL's `[T + 1, B]` layout). Two ways to fill it, chosen by
+//! [`GradPath`] (the learner's configuration):
 //!
-//! - [`GradPath::Recompute`]: each step runs the network under
-//!   `no_grad` on a [`CellInput`] and appends that input; the update
-//!   re-encodes all `T·B` observations in one batched call, unrolls the
-//!   LSTM over the stored features from the stored initial state (resetting
-//!   where an episode ended), and applies the heads to all `T·B` core
-//!   outputs at once;
-//! - [`GradPath::PerStep`]: each step runs the network with autograd
-//!   (first layer by gather-and-sum) and keeps its logits and value; the
-//!   update back-propagates through those graphs;
-//! - [`GradPath::Plain`]: the same with the dense first convolution over
-//!   one-hot planes (the benchmark's baseline);
-//! - [`GradPath::RustEncoder`]: the encoder in the project's own kernels
-//!   outside the graph, each step's features a leaf of its graph (the core
-//!   and heads), the encoder's backward run once over the whole rollout
-//!   ([`crate::a2c::encoder`]);
-//! - [`GradPath::RustCore`] (the default): the whole network in the own
-//!   kernels, no graph while acting; the loss in tch over the rollout's
-//!   logits and values, the rest of the backward (through time) in the own
-//!   kernels ([`crate::a2c::rust_net`]).
+//! - [`GradPath::RustCore`] (production): the whole network in the
+//!   project's own kernels, no graph while acting; the loss in tch over the
+//!   rollout's logits and values, the rest of the backward (through time)
+//!   in the own kernels ([`crate::a2c::rust_net`]);
+//! - [`GradPath::Tch`] (the reference): each step runs the network with
+//!   tch's autograd (first layer by gather-and-sum) and keeps its logits and
+//!   value; the update back-propagates through those graphs.
 //!
-//! All five give the same loss and gradients for the same rollout (tests
-//! check it). Which is fastest is measured by `worldgraph bench learner`:
-//! with these small networks on a CPU the update is compute-bound, so the
-//! recomputation's second forward pass costs more than batching saves,
-//! and the own kernels' GEMM outruns libtorch's at these shapes
-//! (`docs/notes/2026-12-01-learner-throughput.md`).
+//! Both give the same loss and gradients for the same rollout (tests check
+//! it). With these small networks on a CPU the update is compute-bound, and
+//! the own kernels' GEMM outruns libtorch's at these shapes
+//! (`worldgraph bench learner`; the history in
+//! `docs/notes/2026-12-01-learner-throughput.md`).
 
 use tch::{Kind, Tensor, nn};
 
-use super::encoder::{RustEncoder, with_gradients};
 pub use super::grad_path::GradPath;
-use super::input::{CellInput, GoalMarks, encode_obs, goal_planes};
+use super::input::{CellInput, GoalMarks, goal_planes};
 use super::net::{ActorCritic, ActorCriticOutput, LstmState};
 use super::rust_net::RustActorCritic;
 use super::tensors::floats;
@@ -49,23 +35,16 @@ use crate::batch_env::ObsView;
 pub struct Rollout {
     path: GradPath,
     num_envs: usize,
-    /// Observations of the steps (recompute path).
-    inputs: CellInput,
-    /// Logits and values of every step with their graphs (per-step path).
+    /// Logits and values of every step with their graphs (tch path).
     graph_logits: Vec<Tensor>,
     graph_values: Vec<Tensor>,
-    /// The encoder of the own kernels and its activations (rust-encoder
-    /// path; behind a lock because [`Self::loss`] runs its backward
-    /// through `&self`).
-    encoder: std::sync::Mutex<Option<RustEncoder>>,
     /// The whole network in the own kernels and its activations (rust-core
-    /// path; locked for the same reason).
+    /// path; behind a lock because [`Self::loss`] runs its backward through
+    /// `&self`).
     own_net: std::sync::Mutex<Option<RustActorCritic>>,
-    /// Whether the encoder's (or the own network's) weights are to be re-read before the next
+    /// Whether the own network's weights are to be re-read before the next
     /// step (set by [`Self::start`]: an update may have changed them).
     encoder_stale: bool,
-    /// Every step's features, the leaves of its graph (rust-encoder path).
-    leaves: Vec<Tensor>,
     /// Actions `[T·B]`.
     pub actions: Vec<i64>,
     /// Rewards `[T·B]`.
@@ -88,25 +67,16 @@ pub struct Rollout {
 }
 
 impl Rollout {
-    /// An empty rollout of `num_envs` environments on `width × height`
-    /// grids.
-    pub fn new(
-        path: GradPath,
-        num_envs: usize,
-        width: usize,
-        height: usize,
-        goal_planes: usize,
-    ) -> Rollout {
+    /// An empty rollout of `num_envs` environments, filled on gradient path
+    /// `path`.
+    pub fn new(path: GradPath, num_envs: usize) -> Rollout {
         Rollout {
             path,
             num_envs,
-            inputs: CellInput::new(width, height, goal_planes),
             graph_logits: Vec::new(),
             graph_values: Vec::new(),
-            encoder: std::sync::Mutex::new(None),
             own_net: std::sync::Mutex::new(None),
             encoder_stale: true,
-            leaves: Vec::new(),
             actions: Vec::new(),
             rewards: Vec::new(),
             dones: Vec::new(),
@@ -131,10 +101,8 @@ impl Rollout {
     /// Empties the rollout and records the core state the next one starts
     /// from.
     pub fn start(&mut self, state: &LstmState) {
-        self.inputs.clear();
         self.graph_logits.clear();
         self.graph_values.clear();
-        self.leaves.clear();
         self.encoder_stale = true;
         self.actions.clear();
         self.rewards.clear();
@@ -146,9 +114,8 @@ impl Rollout {
     }
 
     /// One step of `net` on `obs` from `state`, recorded for the update:
-    /// under `no_grad` on the fast input (recompute path), or with autograd
-    /// on the dense input (per-step path). The returned logits carry no
-    /// graph in either case.
+    /// in the own kernels (rust-core path), or with tch's autograd (tch
+    /// path). The returned logits carry no graph in either case.
     pub fn act(
         &mut self,
         net: &ActorCritic,
@@ -157,36 +124,11 @@ impl Rollout {
         state: &LstmState,
     ) -> ActorCriticOutput {
         let t0 = std::time::Instant::now();
+        let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
+        input.push_obs(obs, goals);
+        let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
         match self.path {
-            GradPath::Recompute => {
-                let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
-                input.push_obs(obs, goals);
-                self.inputs.extend_from(&input);
-                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
-                let out = tch::no_grad(|| net.step(&input, state));
-                self.values.extend(floats(&out.value));
-                PhaseTimes::lap(&mut self.times.act, t1);
-                out
-            }
-            GradPath::RustEncoder => {
-                let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
-                input.push_obs(obs, goals);
-                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
-                let encoder = current(
-                    &mut self.encoder,
-                    std::mem::take(&mut self.encoder_stale),
-                    || RustEncoder::new(net.trunk()),
-                    |e| e.load(net.trunk()),
-                );
-                let features = encoder.forward(&input).set_requires_grad(true);
-                let out = net.step_features(&features, state);
-                self.leaves.push(features);
-                self.keep_graph(out, t1)
-            }
             GradPath::RustCore => {
-                let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
-                input.push_obs(obs, goals);
-                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
                 let own = current(
                     &mut self.own_net,
                     std::mem::take(&mut self.encoder_stale),
@@ -198,20 +140,8 @@ impl Rollout {
                 PhaseTimes::lap(&mut self.times.act, t1);
                 out
             }
-            GradPath::PerStep | GradPath::Plain => {
-                let (x, input) = if self.path == GradPath::Plain {
-                    (Some(encode_obs(obs, goals)), None)
-                } else {
-                    let mut input = CellInput::new(obs.width, obs.height, goal_planes(goals));
-                    input.push_obs(obs, goals);
-                    (None, Some(input))
-                };
-                let t1 = PhaseTimes::lap(&mut self.times.encode, t0);
-                let out = match (&x, &input) {
-                    (Some(x), _) => net.forward(x, state),
-                    (_, Some(input)) => net.step(input, state),
-                    _ => unreachable!("one of the two inputs is built"),
-                };
+            GradPath::Tch => {
+                let out = net.step(&input, state);
                 self.keep_graph(out, t1)
             }
         }
@@ -252,24 +182,7 @@ impl Rollout {
     pub fn loss(&self, net: &ActorCritic, cfg: &A2cConfig) -> (Tensor, LossFigures) {
         let (steps, b) = (self.steps() as i64, self.num_envs as i64);
         let (logits, values) = match self.path {
-            GradPath::Recompute => {
-                let trunk = net.trunk();
-                let features = trunk.features(&self.inputs).view([steps, b, -1]);
-                // The core is reset before step t where step t − 1 ended an
-                // episode; the initial state was reset by the caller.
-                let mut reset = vec![0f32; self.dones.len()];
-                reset[self.num_envs..]
-                    .copy_from_slice(&self.dones[..self.dones.len() - self.num_envs]);
-                let reset = Tensor::from_slice(&reset).view([steps, b]);
-                let init = self
-                    .init_state
-                    .as_ref()
-                    .expect("invariant: start() before loss()");
-                let (hs, _) = trunk.unroll(&features, init, &reset);
-                let (logits, values) = net.heads(&hs.view([steps * b, -1]));
-                (logits, values)
-            }
-            GradPath::PerStep | GradPath::Plain | GradPath::RustEncoder => (
+            GradPath::Tch => (
                 Tensor::cat(&self.graph_logits, 0),
                 Tensor::cat(&self.graph_values, 0),
             ),
@@ -305,9 +218,6 @@ impl Rollout {
             value: values.to_kind(Kind::Float),
         };
         let (loss, figures) = a2c_loss(&terms, &adv, &ret, &self.weights, cfg);
-        if self.path == GradPath::RustEncoder {
-            return (self.encoder_backward(net, &loss), figures);
-        }
         if self.path == GradPath::RustCore {
             let mut slot = self
                 .own_net
@@ -320,50 +230,6 @@ impl Rollout {
             return (loss, figures);
         }
         (loss, figures)
-    }
-
-    /// The rust-encoder path's backward: back-propagates `loss` through the
-    /// steps' graphs to their feature leaves and to the core's and heads'
-    /// parameters, then runs the encoder's backward over the whole rollout;
-    /// returns the loss whose `backward` hands all these gradients to the
-    /// caller's optimiser ([`with_gradients`]).
-    fn encoder_backward(&self, net: &ActorCritic, loss: &Tensor) -> Tensor {
-        let trunk = net.trunk();
-        let rest: Vec<Tensor> = trunk
-            .core_parameters()
-            .into_iter()
-            .chain(net.head_parameters())
-            .filter(Tensor::requires_grad)
-            .collect();
-        let inputs: Vec<&Tensor> = self.leaves.iter().chain(&rest).collect();
-        let grads = Tensor::run_backward(&[loss], &inputs, false, false);
-        let (leaf_grads, rest_grads) = grads.split_at(self.leaves.len());
-        let dfeatures: Vec<Tensor> = leaf_grads
-            .iter()
-            .zip(&self.leaves)
-            .map(|(g, leaf)| {
-                if g.defined() {
-                    g.shallow_clone()
-                } else {
-                    leaf.zeros_like()
-                }
-            })
-            .collect();
-        let dfeatures = floats(&Tensor::cat(&dfeatures, 0));
-        let mut slot = self
-            .encoder
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
-        let encoder = slot
-            .as_mut()
-            .expect("invariant: the rust-encoder path encoded the rollout's steps");
-        let encoder_grads = encoder.backward(&dfeatures);
-        let params: Vec<Tensor> = trunk.encoder_parameters().into_iter().chain(rest).collect();
-        let grads: Vec<Tensor> = encoder_grads
-            .into_iter()
-            .chain(rest_grads.iter().map(Tensor::shallow_clone))
-            .collect();
-        with_gradients(loss, &params, &grads)
     }
 
     /// The update: [`Self::loss`], then one clipped Adam step.
@@ -483,7 +349,7 @@ mod tests {
         steps: usize,
         seed: u64,
     ) -> Rollout {
-        let mut rollout = Rollout::new(path, 5, layout.width, layout.height, 1);
+        let mut rollout = Rollout::new(path, 5);
         refill(&mut rollout, net, layout, steps, seed);
         rollout
     }
@@ -511,65 +377,6 @@ mod tests {
         }
         rollout.bootstrap =
             bootstrap_values(net, &env.observe(), Some(GoalMarks::one(&goals)), &state);
-    }
-
-    #[test]
-    fn the_batched_recomputation_gives_the_per_step_loss_and_gradients() {
-        let layout = Maze::Small.layout(false);
-        let vs = nn::VarStore::new(tch::Device::Cpu);
-        let net = crate::seeding::init_seeded(4, || {
-            ActorCritic::new(
-                &vs.root(),
-                &ActorCriticConfig {
-                    conv_channels: [8, 16],
-                    hidden: 32,
-                    num_actions: 3,
-                    goal_planes: 1,
-                },
-                layout.width,
-                layout.height,
-            )
-        });
-        let grads = |path| {
-            let rollout = fill(path, &net, &layout, 12, 9);
-            loss_and_gradients(&rollout, &net, &vs)
-        };
-        let (loss_fast, fig_fast, g_fast) = grads(GradPath::Recompute);
-        let (loss_plain, fig_plain, g_plain) = grads(GradPath::Plain);
-        let (loss_step, _, g_step) = grads(GradPath::PerStep);
-        assert!(
-            (loss_step - loss_plain).abs() < 1e-5,
-            "{loss_step} vs {loss_plain}"
-        );
-        for ((name, a), (_, b)) in g_step.iter().zip(&g_plain) {
-            let scale = b.abs().max().double_value(&[]).max(1e-3);
-            assert!(
-                (a - b).abs().max().double_value(&[]) / scale < 1e-4,
-                "{name} (per-step, gather)"
-            );
-        }
-        assert!(
-            (loss_fast - loss_plain).abs() < 1e-5,
-            "{loss_fast} vs {loss_plain}"
-        );
-        assert!((fig_fast.entropy - fig_plain.entropy).abs() < 1e-5);
-        assert_eq!(fig_fast.entries, fig_plain.entries);
-        assert!(
-            fig_fast.entries < 60.0,
-            "some steps are left out by weight 0"
-        );
-        for ((name, a), (_, b)) in g_fast.iter().zip(&g_plain) {
-            let scale = b.abs().max().double_value(&[]).max(1e-3);
-            let diff = (a - b).abs().max().double_value(&[]);
-            assert!(
-                diff / scale < 1e-4,
-                "{name}: gradients differ by {diff} (scale {scale})"
-            );
-            assert!(
-                b.abs().sum(tch::Kind::Float).double_value(&[]) > 0.0,
-                "{name} has no gradient"
-            );
-        }
     }
 
     /// The loss and every parameter's gradient of `rollout` (the gradients
@@ -639,26 +446,24 @@ mod tests {
     }
 
     #[test]
-    fn the_own_kernels_give_the_per_step_loss_and_gradients_on_a_simulator_rollout() {
+    fn the_own_kernels_give_the_tch_loss_and_gradients_on_a_simulator_rollout() {
         for maze in [Maze::Small, Maze::Medium] {
             let layout = maze.layout(false);
             let vs = nn::VarStore::new(tch::Device::Cpu);
             let net = default_net(&vs, 1, layout.width, layout.height);
             let run = |path| loss_and_gradients(&fill(path, &net, &layout, 20, 9), &net, &vs);
-            let per_step = run(GradPath::PerStep);
+            let reference = run(GradPath::Tch);
             assert!(
-                per_step.1.entries < 100.0,
+                reference.1.entries < 100.0,
                 "some steps are left out by weight 0"
             );
-            for path in [GradPath::RustEncoder, GradPath::RustCore] {
-                let what = format!("{maze:?}, {}", path.name());
-                assert_same_function(&what, &run(path), &per_step);
-            }
+            let what = format!("{maze:?}, rust-core");
+            assert_same_function(&what, &run(GradPath::RustCore), &reference);
         }
     }
 
     #[test]
-    fn the_own_kernels_give_the_per_step_loss_and_gradients_on_random_inputs() {
+    fn the_own_kernels_give_the_tch_loss_and_gradients_on_random_inputs() {
         // Random grids (any cell code), agents anywhere facing anywhere,
         // keys carried or not, two goal slots (one sometimes empty or on
         // the agent's cell), random rewards and episode ends.
@@ -667,7 +472,7 @@ mod tests {
         let net = default_net(&vs, 2, w, h);
         let run = |path| {
             let mut rng = SmallRng::seed_from_u64(21);
-            let mut rollout = Rollout::new(path, n, w, h, 2);
+            let mut rollout = Rollout::new(path, n);
             let mut state = net.zero_state(n as i64);
             rollout.start(&state);
             let draw = |rng: &mut SmallRng| {
@@ -698,11 +503,11 @@ mod tests {
             rollout.bootstrap = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             loss_and_gradients(&rollout, &net, &vs)
         };
-        let per_step = run(GradPath::PerStep);
-        for path in [GradPath::RustEncoder, GradPath::RustCore] {
-            let what = format!("random inputs, {}", path.name());
-            assert_same_function(&what, &run(path), &per_step);
-        }
+        assert_same_function(
+            "random inputs, rust-core",
+            &run(GradPath::RustCore),
+            &run(GradPath::Tch),
+        );
     }
 
     #[test]
@@ -710,7 +515,7 @@ mod tests {
         // Two rollouts into one `Rollout` with an optimiser step between
         // them: the second's gradients are those of the updated weights.
         let layout = Maze::Small.layout(false);
-        let results: Vec<_> = [GradPath::PerStep, GradPath::RustEncoder, GradPath::RustCore]
+        let results: Vec<_> = [GradPath::Tch, GradPath::RustCore]
             .into_iter()
             .map(|path| {
                 let vs = nn::VarStore::new(tch::Device::Cpu);
@@ -723,7 +528,6 @@ mod tests {
                 loss_and_gradients(&rollout, &net, &vs)
             })
             .collect();
-        assert_same_function("after an update, rust-encoder", &results[1], &results[0]);
-        assert_same_function("after an update, rust-core", &results[2], &results[0]);
+        assert_same_function("after an update, rust-core", &results[1], &results[0]);
     }
 }

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::a2c::A2cConfig;
 use crate::a2c::net::ActorCriticConfig;
+use crate::a2c::rollout::GradPath;
 use crate::error::ConfigError;
 
 /// Settings of `π_g`. The paper gives no values for `π_g` beyond "A2C" and
@@ -58,6 +59,11 @@ pub struct GcpConfig {
     pub conv_channels: [i64; 2],
     /// Width of the encoder's output and of the LSTM core.
     pub hidden: i64,
+    /// How `π_g`'s update gets its gradients: `"rust-core"` (production,
+    /// the default; not written to `config.toml`) or `"tch"` (the reference
+    /// the tests hold it equal to).
+    #[serde(skip_serializing_if = "GradPath::is_production")]
+    pub grad_path: GradPath,
 }
 
 impl Default for GcpConfig {
@@ -80,6 +86,7 @@ impl Default for GcpConfig {
             record_missed_legs: true,
             conv_channels: [16, 32],
             hidden: 128,
+            grad_path: GradPath::RustCore,
         }
     }
 }

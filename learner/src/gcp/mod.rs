@@ -199,13 +199,7 @@ impl GoalConditionedPolicy {
                 )
             },
             state,
-            rollout: Rollout::new(
-                GradPath::default(),
-                num_envs,
-                layout.width,
-                layout.height,
-                1,
-            ),
+            rollout: Rollout::new(cfg.grad_path, num_envs),
             trained_kinds: kinds_of(layout),
         })
     }
@@ -506,10 +500,10 @@ impl GoalConditionedPolicy {
         })
     }
 
-    /// Chooses how the update gets its gradients (the benchmark's plain
-    /// path is [`GradPath::PerStep`]); the result is the same either way.
+    /// Chooses how the update gets its gradients (`bench learner`'s baseline
+    /// is [`GradPath::Tch`]); the result is the same either way.
     pub fn set_grad_path(&mut self, path: GradPath) {
-        self.rollout = Rollout::new(path, self.num_envs, self.width, self.height, 1);
+        self.rollout = Rollout::new(path, self.num_envs);
     }
 
     /// Where training time went since the last [`Self::take_times`].

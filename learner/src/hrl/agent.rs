@@ -106,7 +106,7 @@ impl HrlAgent {
             )?),
             _ => None,
         };
-        let traverser = Traverser::new(cfg, task, inputs.graph, inputs.gcp, width, height)?;
+        let traverser = Traverser::new(cfg, task, inputs.graph, inputs.gcp)?;
         let ctl = Controller::new(
             cfg.envs,
             seed,
@@ -158,7 +158,8 @@ impl HrlAgent {
     }
 
     /// Chooses the gradient path of the Worker's (or baseline's) update
-    /// (the benchmark's plain path is [`GradPath::PerStep`]).
+    /// (`bench learner` measures [`GradPath::RustCore`] against the
+    /// [`GradPath::Tch`] reference this way).
     pub fn set_grad_path(&mut self, path: GradPath) {
         self.worker.set_grad_path(path, self.cfg.envs);
         if let Some(m) = self.manager.as_mut() {
@@ -243,12 +244,9 @@ impl HrlAgent {
     /// Model FLOPs per env-step of the Worker's (baseline's) update path,
     /// plus the Manager's forward and backward once per decision (about one
     /// per `c / 2` steps).
-    pub fn flops_per_env_step(&self, path: GradPath) -> f64 {
-        let worker = crate::a2c::net::flops_per_env_step(
-            self.worker.net.trunk(),
-            self.actions.len() as i64,
-            path,
-        );
+    pub fn flops_per_env_step(&self) -> f64 {
+        let worker =
+            crate::a2c::net::flops_per_env_step(self.worker.net.trunk(), self.actions.len() as i64);
         match &self.manager {
             Some(m) => worker + m.flops_per_decision() / (self.horizon as f64 / 2.0).max(1.0),
             None => worker,

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 use sim::{Layout, Task};
 
 use crate::a2c::A2cConfig;
+use crate::a2c::rollout::GradPath;
 use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
 
@@ -178,6 +179,13 @@ pub struct AgentConfig {
     /// as the maze is covered, so the task's optimum is kept; it is never
     /// paid in validation or testing, and never to the Worker. 0: off.
     pub count_bonus: f32,
+    /// How the Worker's (or the baseline's) and the Manager's updates get
+    /// their gradients: `"rust-core"` (production, the default; not written
+    /// to `config.toml`) or `"tch"` (the reference the tests hold it equal
+    /// to). Both compute the same update; the figures differ in the last
+    /// float bits.
+    #[serde(skip_serializing_if = "GradPath::is_production")]
+    pub grad_path: GradPath,
 }
 
 /// Whether the exit joins the wide-goal candidates `V` (section 4 is
@@ -335,6 +343,7 @@ impl Default for AgentConfig {
             door_key_actions: DoorKeyActions::default(),
             worker_task_share: 0.0,
             count_bonus: 0.0,
+            grad_path: GradPath::RustCore,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: ExitCandidate::default(),
             unseen_inputs: UnseenInputs::default(),
@@ -666,6 +675,29 @@ mod tests {
             let back: AgentConfig = toml::from_str(&toml::to_string(&cfg).unwrap()).unwrap();
             assert_eq!(back.exit_candidate, c);
         }
+    }
+
+    /// The gradient path is a setting: absent (every `config.toml` written
+    /// before it existed) it is the production path and is not written
+    /// back, so those files and their digests read the same; the reference
+    /// is written and read back; a retired path is refused by name.
+    #[test]
+    fn the_gradient_path_is_a_setting_written_only_off_the_production_path() {
+        let default = AgentConfig::default();
+        assert_eq!(default.grad_path, GradPath::RustCore);
+        let text = toml::to_string(&default).unwrap();
+        assert!(!text.contains("grad_path"), "{text}");
+        let tch = AgentConfig {
+            grad_path: GradPath::Tch,
+            ..AgentConfig::default()
+        };
+        let text = toml::to_string(&tch).unwrap();
+        assert!(text.contains("grad_path = \"tch\""), "{text}");
+        assert_eq!(toml::from_str::<AgentConfig>(&text).unwrap(), tch);
+        let err = toml::from_str::<AgentConfig>("grad_path = \"rust-encoder\"")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("rust-core") && err.contains("tch"), "{err}");
     }
 
     /// Every configuration a grid can name parses back to itself, carries

@@ -227,7 +227,7 @@ impl ManagerSide {
             candidates,
             window,
             object_goals: cfg.object_goals,
-            path: GradPath::default(),
+            path: cfg.grad_path,
             own: std::sync::Mutex::new(None),
         }
     }

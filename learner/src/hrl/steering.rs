@@ -49,19 +49,19 @@ pub enum Leg {
 }
 
 impl Steering {
-    /// Fine-tuning of `gcp` for `num_envs` environments of a
-    /// `width × height` grid, with the Worker's goal reward and step penalty.
+    /// Fine-tuning of `gcp` for `num_envs` environments, its update on
+    /// gradient path `path` (the agent's), with the Worker's goal reward and
+    /// step penalty.
     pub fn new(
         gcp: &GoalConditionedPolicy,
         num_envs: usize,
-        width: usize,
-        height: usize,
+        path: GradPath,
         goal_reward: f32,
         step_penalty: f32,
     ) -> Steering {
         let cfg = gcp.config().a2c();
         Steering {
-            rollout: Rollout::new(GradPath::default(), num_envs, width, height, 1),
+            rollout: Rollout::new(path, num_envs),
             opt: Adam::new(&[("pi_g", gcp.var_store())], cfg.learning_rate),
             cfg,
             goal_reward,
@@ -151,7 +151,7 @@ mod tests {
         let layout = sim::Maze::Small.layout(false);
         let gcp = GoalConditionedPolicy::new(&crate::gcp::GcpConfig::default(), &layout, 1, 3, 0)
             .unwrap();
-        let mut s = Steering::new(&gcp, 4, layout.width, layout.height, 1.0, -0.01);
+        let mut s = Steering::new(&gcp, 4, GradPath::RustCore, 1.0, -0.01);
         s.start(&gcp.network().zero_state(4));
         s.book(
             &[0, 1, 2, 0],

@@ -386,15 +386,12 @@ pub(super) struct Traverser {
 impl Traverser {
     /// Traversals over `graph` (with `cfg.traversal`) for `task`, steered
     /// by `pi_g` in MultiGoal-Stochastic (which needs it there) and
-    /// fine-tuned as `cfg` says, for `cfg.envs` environments on a
-    /// `width × height` grid.
+    /// fine-tuned as `cfg` says, for `cfg.envs` environments.
     pub(super) fn new(
         cfg: &AgentConfig,
         task: Task,
         graph: Option<WorldGraph>,
         pi_g: Option<GoalConditionedPolicy>,
-        width: usize,
-        height: usize,
     ) -> Result<Traverser, LearnerError> {
         let execution = if task == Task::MultiGoalStochastic {
             Execution::Steer
@@ -413,8 +410,7 @@ impl Traverser {
                 Some(Steering::new(
                     gcp,
                     cfg.envs,
-                    width,
-                    height,
+                    cfg.grad_path,
                     cfg.goal_reward,
                     cfg.step_penalty,
                 ))

@@ -283,20 +283,14 @@ impl WorkerSide {
             vs,
             net,
             opt,
-            rollout: Rollout::new(
-                GradPath::default(),
-                cfg.envs,
-                width,
-                height,
-                cfg.goal_planes(),
-            ),
+            rollout: Rollout::new(cfg.grad_path, cfg.envs),
         }
     }
 
     /// Rebuilds the (empty) rollout of `envs` environments with gradient
     /// path `path`.
     pub(super) fn set_grad_path(&mut self, path: GradPath, envs: usize) {
-        self.rollout = Rollout::new(path, envs, self.width, self.height, self.planes);
+        self.rollout = Rollout::new(path, envs);
     }
 
     /// The goal marks of `goals` ([`goal_marks`]).

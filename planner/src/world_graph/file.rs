@@ -161,7 +161,10 @@ impl WorldGraph {
 
     /// Saves [`WorldGraph::to_json`] atomically (write, fsync, rename).
     pub fn save(&self, path: &Path) -> Result<(), PlannerError> {
-        Ok(sim::atomic_file::write_atomic(path, self.to_json().as_bytes())?)
+        Ok(sim::atomic_file::write_atomic(
+            path,
+            self.to_json().as_bytes(),
+        )?)
     }
 
     /// Loads a graph saved by [`WorldGraph::save`].

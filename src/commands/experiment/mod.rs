@@ -379,7 +379,7 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
                 grid: plan.grid_label.clone(),
                 summary,
                 commit: plan.commit.clone(),
-                grad_path: GradPath::default().name().to_string(),
+                grad_path: discovery_grad_path(&dir)?.name().to_string(),
             };
             let path = discover_path(&plan.results, &spec.maze, spec.seed);
             write_result(&path, &serde_json::to_vec_pretty(&r)?)
@@ -432,6 +432,7 @@ fn run_result(
     discover: Option<DiscoverSpec>,
     t: &TestSummary,
 ) -> RunResult {
+    let grad_path = train_config.agent.grad_path.name().to_string();
     RunResult {
         schema: RESULT_SCHEMA,
         maze: maze.name().to_string(),
@@ -470,7 +471,28 @@ fn run_result(
         torch_threads: plan.threads,
         jobs: plan.jobs,
         commit: plan.commit.clone(),
-        grad_path: GradPath::default().name().to_string(),
+        grad_path,
+    }
+}
+
+/// The gradient path a discovery run's `π_g` trained on, from its
+/// `config.toml` (`discovery.gcp.grad_path`; absent: the production path).
+fn discovery_grad_path(dir: &Path) -> anyhow::Result<GradPath> {
+    let path = dir.join("config.toml");
+    let table: toml::Table = toml::from_str(
+        &std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?,
+    )
+    .with_context(|| format!("{} is not TOML", path.display()))?;
+    let name = table
+        .get("discovery")
+        .and_then(|d| d.get("gcp"))
+        .and_then(|g| g.get("grad_path"))
+        .and_then(|v| v.as_str());
+    match name {
+        None => Ok(GradPath::RustCore),
+        Some(n) => GradPath::from_name(n)
+            .with_context(|| format!("{}: unknown gradient path {n:?}", path.display())),
     }
 }
 

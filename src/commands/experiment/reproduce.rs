@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Child;
 
 use anyhow::Context;
+use learner::a2c::rollout::GradPath;
 use learner::run::protocol::TestSummary;
 use sim::{Maze, Task};
 
@@ -21,6 +22,17 @@ pub(super) fn reproduce(
     a: &ExperimentArgs,
 ) -> anyhow::Result<std::process::ExitCode> {
     let r = read_run(summary)?;
+    anyhow::ensure!(
+        GradPath::from_name(&r.grad_path).is_some(),
+        "{} was trained on the gradient path {:?} (commit {}), which this version no longer \
+         has: it keeps `rust-core` and the `tch` reference. The same function in another float \
+         order reproduces only on its own path: check out that commit (`git checkout {}`, \
+         without any `+dirty`) and run this command there",
+        summary.display(),
+        r.grad_path,
+        r.commit,
+        r.commit.trim_end_matches("+dirty")
+    );
     let maze: Maze = r
         .maze
         .parse()
@@ -99,8 +111,7 @@ pub(super) fn reproduce(
                     spec.rounds
                 );
                 let job = Job::Discover { spec: spec.clone() };
-                let mut cmd = discover_command(&plan, spec)?;
-                cmd.env("WORLDGRAPH_GRAD_PATH", &r.grad_path);
+                let cmd = discover_command(&plan, spec)?;
                 wait_ok(
                     start(cmd, &plan.log_path(&job), plan.threads)?,
                     &plan.log_path(&job),
@@ -128,7 +139,7 @@ pub(super) fn reproduce(
         seed: r.seed,
         needs: r.discover.as_ref().map(|_| 0),
     };
-    let mut cmd = train_command(
+    let cmd = train_command(
         &plan,
         &r.train_config,
         maze,
@@ -137,9 +148,8 @@ pub(super) fn reproduce(
         r.seed,
         graph.as_deref(),
     )?;
-    // The same function in another float order on another path: the rerun
-    // takes the summary's.
-    cmd.env("WORLDGRAPH_GRAD_PATH", &r.grad_path);
+    // The summary's training config carries its gradient path
+    // (`agent.grad_path`).
     eprintln!("reproduce: on the gradient path {}", r.grad_path);
     wait_ok(
         start(cmd, &plan.log_path(&job), plan.threads)?,
