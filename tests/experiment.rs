@@ -169,6 +169,28 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         ],
     ));
     assert!(err.contains("differs"), "{err}");
+    // The summaries record the production gradient path; one made on a path
+    // this version retired names the commit it reproduces on, and starts
+    // nothing.
+    assert_eq!(a2c["grad_path"], "rust-core");
+    let mut old = a2c.clone();
+    old["grad_path"] = serde_json::json!("rust-encoder");
+    old["commit"] = serde_json::json!("0123456789abcdef0123456789abcdef01234567+dirty");
+    std::fs::write(d.join("old.json"), serde_json::to_vec(&old).unwrap()).unwrap();
+    let err = refused(&worldgraph(
+        d,
+        &["experiment", "--reproduce", "old.json", "--work", "old"],
+    ));
+    assert!(
+        err.contains("\"rust-encoder\"")
+            && err.contains("git checkout 0123456789abcdef0123456789abcdef01234567`")
+            && err.contains("uncommitted changes"),
+        "{err}"
+    );
+    assert!(
+        !d.join("old").exists(),
+        "a refused reproduction starts nothing"
+    );
 
     // The tables: each run's cell beside the paper's value, the budget, the
     // time to score and the curves.

@@ -24,14 +24,18 @@ pub(super) fn reproduce(
     let r = read_run(summary)?;
     anyhow::ensure!(
         GradPath::from_name(&r.grad_path).is_some(),
-        "{} was trained on the gradient path {:?} (commit {}), which this version no longer \
-         has: it keeps `rust-core` and the `tch` reference. The same function in another float \
-         order reproduces only on its own path: check out that commit (`git checkout {}`, \
-         without any `+dirty`) and run this command there",
+        "{} was trained on the gradient path {:?}, which this version no longer has: it keeps \
+         `rust-core` and the `tch` reference. The same function in another float order \
+         reproduces only on its own path: check out the summary's commit (`git checkout {}`{}) \
+         and run this command there",
         summary.display(),
         r.grad_path,
-        r.commit,
-        r.commit.trim_end_matches("+dirty")
+        r.commit.trim_end_matches("+dirty"),
+        if r.commit.ends_with("+dirty") {
+            "; the run's tree had uncommitted changes, so that commit is the nearest"
+        } else {
+            ""
+        }
     );
     let maze: Maze = r
         .maze
