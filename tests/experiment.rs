@@ -69,6 +69,12 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         "{err}"
     );
 
+    // The result set keeps the grid file its summaries came from.
+    assert_eq!(
+        std::fs::read_to_string(d.join("results/tiny.toml")).unwrap(),
+        std::fs::read_to_string(d.join("grid.toml")).unwrap()
+    );
+
     let wn = json(&d.join("results/small/multigoal/wn-pivotal-trav-init/seed-0.json"));
     let a2c = json(&d.join("results/small/multigoal/a2c/seed-0.json"));
     for (r, config) in [(&wn, "wn-pivotal-trav-init"), (&a2c, "a2c")] {
@@ -206,6 +212,15 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     assert!(md.contains(&a2c_cell), "{a2c_cell} not in\n{md}");
     assert!(md.contains("| FN | — | Fail |"), "{md}");
     assert!(md.contains("| small | 3840 | 1920 | 2 |"), "{md}");
+    // Without --out, the tables are the result set's README, its figures
+    // beside it: the set is one folder.
+    ok(&worldgraph(d, &["table", "results"]));
+    let readme = std::fs::read_to_string(d.join("results/README.md")).unwrap();
+    assert!(readme.contains(&a2c_cell), "{readme}");
+    assert!(
+        d.join("results/figures/time-to-score-small-multigoal.png")
+            .is_file()
+    );
     // Every cell's budget beside it, with its share of the paper's 100k
     // iterations × 32 agents × 60 steps.
     assert!(

@@ -43,11 +43,11 @@ def worldgraph_binary() -> pathlib.Path:
 def discover_run(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     """A directory shaped like a `worldgraph discover --maze small` run
     (graph.json, pivotal.json): the pivotal states the committed summary
-    results/small/discover/seed-0.json reports, with the graph the planner
+    results/archive/105k/small/discover/seed-0.json reports, with the graph the planner
     builds over them (discovering anew needs libtorch and minutes)."""
     import worldgraph
 
-    summary = json.loads((REPO / "results" / "small" / "discover" / "seed-0.json").read_text())
+    summary = json.loads((REPO / "results" / "archive" / "105k" / "small" / "discover" / "seed-0.json").read_text())
     cells = [tuple(c) for c in summary["summary"]["pivotal_cells"]]
     graph = worldgraph.WorldGraph.build(cells, task="multigoal", maze="small", seed=0)
     run = tmp_path_factory.mktemp("discover-small")

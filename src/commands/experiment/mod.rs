@@ -518,10 +518,25 @@ pub fn run(a: ExperimentArgs) -> anyhow::Result<std::process::ExitCode> {
     if a.status {
         return status::show(&plan, &cells);
     }
+    if !a.dry_run {
+        keep_grid_file(&plan, &grid_path)?;
+    }
     if a.slurm {
         return slurm::submit(&plan, &cells, &a.sbatch, a.jobs, a.dry_run);
     }
     local::run(&plan, &cells, a.dry_run)
+}
+
+/// A result set keeps the grid file its summaries came from, beside them:
+/// `<results>/<grid name>.toml` (rewritten only when the grid changed).
+fn keep_grid_file(plan: &Plan, grid_path: &Path) -> anyhow::Result<()> {
+    let text =
+        std::fs::read(grid_path).with_context(|| format!("cannot read {}", grid_path.display()))?;
+    let kept = plan.results.join(format!("{}.toml", plan.grid.name));
+    if std::fs::read(&kept).ok().as_deref() != Some(&text[..]) {
+        write_atomic(&kept, &text)?;
+    }
+    Ok(())
 }
 
 /// Records the discoveries that finished after their cell was stopped,

@@ -30,9 +30,11 @@ pub struct TableArgs {
     /// The results directory (`results/<maze>/<task>/<config>/seed-<n>.json`).
     #[arg(default_value = "results")]
     pub results: PathBuf,
-    /// The Markdown file written.
-    #[arg(long, default_value = "docs/results.md")]
-    pub out: PathBuf,
+    /// The Markdown file written [default: `README.md` in the results
+    /// directory, so a result set is one folder: its grid file, its
+    /// summaries, its tables and figures].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Directory of the figures (linked from the Markdown file relative to
     /// it) [default: `figures/` beside --out].
     #[arg(long)]
@@ -104,11 +106,12 @@ fn cell_text(runs: Option<&Vec<&RunResult>>, scale: f64, digits: usize) -> Strin
 
 /// Runs `worldgraph table`.
 pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
+    let out = a.out.clone().unwrap_or_else(|| a.results.join("README.md"));
     anyhow::ensure!(
-        !a.out.is_dir(),
+        !out.is_dir(),
         "--out {} is a directory; name the Markdown file to write (e.g. {}/results.md)",
-        a.out.display(),
-        a.out.display()
+        out.display(),
+        out.display()
     );
     let (runs, nested) = read_all_runs(&a.results)?;
     for n in &nested {
@@ -148,7 +151,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         Some(r)
     };
-    let out_dir = a.out.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
     let figures = a.figures.clone().unwrap_or_else(|| out_dir.join("figures"));
     std::fs::create_dir_all(&figures)
         .with_context(|| format!("cannot create {}", figures.display()))?;
@@ -476,7 +479,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         }
         let _ = writeln!(md, "### {m}, {t}\n\n{}\n", links.join("\n"));
     }
-    write_atomic(&a.out, md.as_bytes())?;
+    write_atomic(&out, md.as_bytes())?;
     let scores = a
         .scores
         .clone()
@@ -489,7 +492,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         "table: {} runs in {} cells → {} (figures in {}, one row per run in {})",
         runs.len(),
         cells.len(),
-        a.out.display(),
+        out.display(),
         figures.display(),
         scores.display()
     );
