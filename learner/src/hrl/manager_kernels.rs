@@ -311,89 +311,6 @@ impl OwnManager {
         }
     }
 
-    /// The update's forward pass through the trunk: the features of the
-    /// `K·B` observations of `input` (step-major: row `k·B + b` is
-    /// environment `b`'s decision `k`), then the core over the `K` steps
-    /// from `init_h`, `init_c` (`[B, hidden]`), its state zeroed before
-    /// row `i` where `reset[i]` (as [`crate::a2c::net::Trunk::unroll_states`]).
-    /// Returns the hidden and cell states after every row, `[K·B,
-    /// hidden]` each; the activations stay for [`Self::unroll_backward`].
-    pub(super) fn unroll(
-        &mut self,
-        input: &CellInput,
-        init_h: &[f32],
-        init_c: &[f32],
-        reset: &[bool],
-        b: usize,
-    ) -> (Vec<f32>, Vec<f32>) {
-        let (hd, g4) = (self.cell.hidden, 4 * self.cell.hidden);
-        let rows = input.len();
-        let k = rows / b;
-        self.encoder.clear();
-        self.encoder.encode(input);
-        let x = self.encoder.features();
-        let (mut hs, mut cs) = (vec![0f32; rows * hd], vec![0f32; rows * hd]);
-        self.h_in = vec![0f32; rows * hd];
-        self.c_in = vec![0f32; rows * hd];
-        self.gates = vec![0f32; rows * g4];
-        self.tanh_c = vec![0f32; rows * hd];
-        self.continues = vec![false; rows];
-        for t in 0..k {
-            for e in 0..b {
-                let i = t * b + e;
-                let dst = i * hd..(i + 1) * hd;
-                if reset[i] {
-                    continue;
-                }
-                self.continues[i] = t > 0;
-                let (h, c) = if t == 0 {
-                    (&init_h[e * hd..][..hd], &init_c[e * hd..][..hd])
-                } else {
-                    (&hs[(i - b) * hd..][..hd], &cs[(i - b) * hd..][..hd])
-                };
-                self.h_in[dst.clone()].copy_from_slice(h);
-                self.c_in[dst].copy_from_slice(c);
-            }
-            let r = t * b..(t + 1) * b;
-            self.cell.forward(
-                &x[r.start * hd..r.end * hd],
-                &self.h_in[r.start * hd..r.end * hd],
-                &self.c_in[r.start * hd..r.end * hd],
-                b,
-                &self.core.w_ih_t,
-                &self.core.w_hh_t,
-                &self.core.bias,
-                &mut self.gates[r.start * g4..r.end * g4],
-                &mut cs[r.start * hd..r.end * hd],
-                &mut self.tanh_c[r.start * hd..r.end * hd],
-                &mut hs[r.start * hd..r.end * hd],
-            );
-        }
-        (hs, cs)
-    }
-
-    /// The backward pass of [`Self::unroll`] from the loss's gradient
-    /// `dh` `[K·B, hidden]` of its hidden states: the gradients of the
-    /// trunk's [`crate::a2c::net::Trunk::encoder_parameters`] then
-    /// [`crate::a2c::net::Trunk::core_parameters`], in tch's layouts.
-    pub(super) fn unroll_backward(&mut self, dh: &[f32], b: usize) -> Vec<tch::Tensor> {
-        let seq = Sequence {
-            gates: &self.gates,
-            c_in: &self.c_in,
-            tanh_c: &self.tanh_c,
-            continues: &self.continues,
-        };
-        trunk_backward(
-            &mut self.encoder,
-            &self.cell,
-            &self.core,
-            &seq,
-            &self.h_in,
-            b,
-            dh,
-        )
-    }
-
     /// FN: the subgoal probabilities `[n, H·W]` (section 4.1), the goal
     /// map's logits added and invalid cells at probability 0.
     pub(super) fn feudal_probs(&self, d: &OwnDecision) -> Vec<f32> {
@@ -513,6 +430,13 @@ impl OwnManager {
 }
 
 impl OwnTrunk for OwnManager {
+    /// The update's forward pass through the trunk: the features of the
+    /// `K·B` observations of `input` (step-major: row `k·B + b` is
+    /// environment `b`'s decision `k`), then the core over the `K` steps
+    /// from `init_h`, `init_c` (`[B, hidden]`), its state zeroed before
+    /// row `i` where `reset[i]` (as [`crate::a2c::net::Trunk::unroll_states`]).
+    /// Returns the hidden and cell states after every row, `[K·B,
+    /// hidden]` each; the activations stay for [`Self::unroll_backward`].
     fn unroll(
         &mut self,
         input: &CellInput,
@@ -521,11 +445,72 @@ impl OwnTrunk for OwnManager {
         reset: &[bool],
         b: usize,
     ) -> (Vec<f32>, Vec<f32>) {
-        OwnManager::unroll(self, input, init_h, init_c, reset, b)
+        let (hd, g4) = (self.cell.hidden, 4 * self.cell.hidden);
+        let rows = input.len();
+        let k = rows / b;
+        self.encoder.clear();
+        self.encoder.encode(input);
+        let x = self.encoder.features();
+        let (mut hs, mut cs) = (vec![0f32; rows * hd], vec![0f32; rows * hd]);
+        self.h_in = vec![0f32; rows * hd];
+        self.c_in = vec![0f32; rows * hd];
+        self.gates = vec![0f32; rows * g4];
+        self.tanh_c = vec![0f32; rows * hd];
+        self.continues = vec![false; rows];
+        for t in 0..k {
+            for e in 0..b {
+                let i = t * b + e;
+                let dst = i * hd..(i + 1) * hd;
+                if reset[i] {
+                    continue;
+                }
+                self.continues[i] = t > 0;
+                let (h, c) = if t == 0 {
+                    (&init_h[e * hd..][..hd], &init_c[e * hd..][..hd])
+                } else {
+                    (&hs[(i - b) * hd..][..hd], &cs[(i - b) * hd..][..hd])
+                };
+                self.h_in[dst.clone()].copy_from_slice(h);
+                self.c_in[dst].copy_from_slice(c);
+            }
+            let r = t * b..(t + 1) * b;
+            self.cell.forward(
+                &x[r.start * hd..r.end * hd],
+                &self.h_in[r.start * hd..r.end * hd],
+                &self.c_in[r.start * hd..r.end * hd],
+                b,
+                &self.core.w_ih_t,
+                &self.core.w_hh_t,
+                &self.core.bias,
+                &mut self.gates[r.start * g4..r.end * g4],
+                &mut cs[r.start * hd..r.end * hd],
+                &mut self.tanh_c[r.start * hd..r.end * hd],
+                &mut hs[r.start * hd..r.end * hd],
+            );
+        }
+        (hs, cs)
     }
 
+    /// The backward pass of [`Self::unroll`] from the loss's gradient
+    /// `dh` `[K·B, hidden]` of its hidden states: the gradients of the
+    /// trunk's [`crate::a2c::net::Trunk::encoder_parameters`] then
+    /// [`crate::a2c::net::Trunk::core_parameters`], in tch's layouts.
     fn unroll_backward(&mut self, dh: &[f32], b: usize) -> Vec<tch::Tensor> {
-        OwnManager::unroll_backward(self, dh, b)
+        let seq = Sequence {
+            gates: &self.gates,
+            c_in: &self.c_in,
+            tanh_c: &self.tanh_c,
+            continues: &self.continues,
+        };
+        trunk_backward(
+            &mut self.encoder,
+            &self.cell,
+            &self.core,
+            &seq,
+            &self.h_in,
+            b,
+            dh,
+        )
     }
 }
 
