@@ -17,15 +17,14 @@ use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::hrl::{AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, IterationStats};
 use learner::run::artefact::{build_agent, check_world_graph_layout};
 use learner::run::config::{
-    MAX_EVAL_SEEDS, RunIdentity, TrainConfig, auto_values, check_budget, config_with_overrides,
-    read_config, resolve_auto, trained_env_steps,
+    MAX_EVAL_SEEDS, TrainConfig, auto_values, check_budget, config_with_overrides, read_config,
+    resolve_auto, trained_env_steps,
 };
-use learner::run::dir::{RunKind, check, describe, kind_of, lock, name_in, record_invocation};
+use learner::run::dir::{RunKind, describe, kind_of, name_in};
 use learner::run::protocol::{
-    self, MAX_TRAIN_SEED, MetricsRow, Observer, RunState, Schedule, TEST_STREAM, TestSummary,
-    VALIDATION_STREAM, eval_env,
+    self, MAX_TRAIN_SEED, MetricsRow, Observer, RunState, TEST_STREAM, TestSummary, eval_env,
 };
-use sim::atomic_file::write_atomic;
+use learner::run::train_run::{LAYOUT_FILE, TrainRun, TrainSpec};
 use sim::{EnvConfig, Layout, Maze, Task};
 
 use crate::chart::{LineChart, Series, XScale};
@@ -195,9 +194,6 @@ fn pipeline_env(
     let (env, p) = crate::pipeline::spawn_sim_env(&w, envs, &run_name, dir)?;
     Ok((Box::new(env), (p, run_name)))
 }
-
-/// The copy of a `--layout` file in its train run, which `evaluate` reads.
-const LAYOUT_FILE: &str = "layout.txt";
 
 /// The layout and environments of a run: the embedded `maze` (its Door-Key
 /// variant for Door-Key) or the layout `file` (`--layout`), whose objects
@@ -387,186 +383,127 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         return Ok(std::process::ExitCode::SUCCESS);
     }
     let dir = run_dir(&a, &layout, &cfg.agent);
-    // Nothing is written before the directory, the world graph and the
-    // run it may hold are known to fit this run.
-    let mut own = vec!["lock".to_string()];
-    own.extend(a.config.as_deref().and_then(|c| name_in(&dir, c)));
-    check("--run", &dir, RunKind::Train, &own)?;
-    let world_graph = world_graph_dir(&a, &layout)?;
-    let mut agent = build_agent(&cfg.agent, &layout, a.task, world_graph.as_deref(), a.seed)?;
-    // The run's files and identity hold what `0 = auto` resolved to.
-    let auto = auto_values(&cfg.agent, Some(&agent), &layout);
-    cfg.agent = resolve_auto(&cfg.agent, auto);
-    let identity = RunIdentity {
-        maze: layout.name.clone(),
+    let mut own_files = vec!["lock".to_string()];
+    own_files.extend(a.config.as_deref().and_then(|c| name_in(&dir, c)));
+    let trained = trained_env_steps(&cfg);
+    let mut run = TrainRun::open(TrainSpec {
+        world_graph: world_graph_dir(&a, &layout)?,
+        dir,
+        config: cfg,
+        layout,
+        env_cfg,
         task: a.task,
         seed: a.seed,
-        world_graph: world_graph.as_ref().map(|p| p.display().to_string()),
-        config: TrainConfig {
-            env_steps: 0,
-            ..cfg.clone()
-        },
-    };
-    let read_state = || -> anyhow::Result<Option<RunState>> {
-        let Some(mut old) = protocol::read_state(&dir)? else {
-            return Ok(None);
-        };
-        // A run recorded before its identity held resolved values says
-        // 0 = auto: resolved for this maze and world graph, as this one.
-        old.identity.config.agent = resolve_auto(&old.identity.config.agent, auto);
-        if old.identity != identity {
-            bail!(
-                "{} holds another run ({}); use another --run",
-                dir.display(),
-                old.identity.differences(&identity)
-            );
-        }
-        Ok(Some(old))
-    };
-    let trained = trained_env_steps(&cfg);
-    if let Some(old) = read_state()?
-        && old.env_steps > trained
-    {
-        bail!(
-            "{} already trained {} env steps, more than --env-steps {} ({trained} rounded); \
-             give at least {} to go on, or another --run (its config.toml is left as it is)",
-            dir.display(),
-            old.env_steps,
-            cfg.env_steps,
-            old.env_steps
-        );
-    }
-    if trained != cfg.env_steps {
+        own_files,
+        keep_layout: a.layout.is_some(),
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        commit: env!("WORLDGRAPH_BUILD_COMMIT").to_string(),
+    })?;
+    if trained != run.config.env_steps {
         eprintln!(
             "train: the budget of {} env steps rounds up to {trained}: whole segments of eval_every {} \
              rounded up to whole iterations of {} envs × {} steps",
-            cfg.env_steps, cfg.eval_every, cfg.agent.envs, cfg.agent.rollout_len
+            run.config.env_steps,
+            run.config.eval_every,
+            run.config.agent.envs,
+            run.config.agent.rollout_len
         );
     }
-
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let _lock = lock(&dir, "train")?;
-    write_atomic(&dir.join("config.toml"), toml::to_string(&cfg)?.as_bytes())?;
-    if a.layout.is_some() {
-        write_atomic(&dir.join(LAYOUT_FILE), layout.to_text().as_bytes())?;
-    }
-    write_atomic(
-        &dir.join("seeds.json"),
-        &serde_json::to_vec_pretty(&serde_json::json!({
-            "train": {"seed": a.seed, "environments": cfg.agent.envs, "streams": format!("(env_seed({}, 0), 0..{}), carried across segments", a.seed, cfg.agent.envs)},
-            "validation": {"stream": VALIDATION_STREAM, "seeds": format!("0..{}", cfg.validation_seeds)},
-            "test": {"stream": TEST_STREAM, "seeds": format!("0..{}", cfg.test_seeds)},
-        }))?,
-    )?;
-    // What made the run: the command line, the crate's version and the
-    // commit the binary was built from (`build.rs`).
-    record_invocation(
-        &dir,
-        env!("CARGO_PKG_VERSION"),
-        env!("WORLDGRAPH_BUILD_COMMIT"),
-    )?;
-
-    if let Some(c) = &agent.window_coverage() {
+    if let Some(c) = &run.agent.window_coverage() {
         eprintln!("train: narrow goals: {c}");
     }
-    let mut state = RunState {
-        identity: identity.clone(),
-        segments_done: 0,
-        env_steps: 0,
-        best_score: None,
-        best_segment: 0,
-        rows: Vec::new(),
-        wall_seconds: Vec::new(),
-    };
-    // Read again under the lock: the state a finished holder left.
-    if let Some(old) = read_state()? {
-        protocol::load_weights(&dir, &old, &mut agent)?;
+    if let Some(steps) = run.resumed_after() {
         eprintln!(
-            "train: resuming {} after {} env steps",
-            dir.display(),
-            old.env_steps
+            "train: resuming {} after {steps} env steps",
+            run.dir().display()
         );
-        state = old;
     }
-
-    let schedule = Schedule::of(&cfg);
-    if state.segments_done < schedule.segments {
-        // The training environments live for the whole run: validation
-        // plays its own environments with a controller of its own, so it
-        // leaves the training stream untouched, and a checkpoint saves the
-        // environments' and the controller's states, so a resumed run goes
-        // on mid-episode exactly where it stopped. (In the pipeline the sim
-        // process owns the environments; there a resumed run starts fresh
-        // episodes seeded by (seed, segment).)
-        let seg_seed = sim::env_seed(a.seed, state.segments_done);
-        let (mut env, pipeline) = if a.pipeline {
-            let (env, p) = pipeline_env(&a, cfg.agent.envs, seg_seed, &dir)?;
-            (env, Some(p))
-        } else {
-            let env: Box<dyn BatchEnvironment> = Box::new(InProcess::new(
-                layout.clone(),
-                env_cfg,
-                cfg.agent.envs,
-                seg_seed,
-                1,
-            )?);
-            (env, None)
-        };
-        let resumed = state.segments_done > 0
-            && protocol::restore_training(&dir, &state, &mut agent, env.as_mut())?;
-        if !resumed {
-            agent.start_segment(env.as_mut(), state.segments_done)?;
-        }
-        let bar = crate::progress::bar(schedule.segments * schedule.iters_per_segment, "train");
-        bar.set_position(state.segments_done * schedule.iters_per_segment);
-        // One row per update (`updates.csv`, TensorBoard), kept up to the
-        // checkpoint the run resumes from.
-        let mut progress = Progress {
-            bar,
-            updates: UpdateLog::open(&dir, state.env_steps, cfg.agent.kind != AgentKind::A2c)?,
-            steps_per_iter: schedule.steps_per_iter,
-            segments: schedule.segments,
-            last_validation: state.rows.last().map(|r| r.validation_score),
-        };
-        protocol::train_segments(
-            &dir,
-            &cfg,
-            &layout,
-            env_cfg,
-            &mut state,
-            &mut agent,
-            env.as_mut(),
-            &mut progress,
-        )?;
-        drop(env);
-        if let Some((mut p, run_name)) = pipeline {
-            p.stop_all(std::time::Duration::from_secs(3));
-            crate::shutdown::teardown(&run_name)?;
-        }
-        progress.bar.finish_and_clear();
+    if run.needs_training() {
+        train_segments(&a, &mut run)?;
     }
-
-    // The best checkpoint on the held-out test seeds.
-    let (summary, test, trace) = protocol::test(
-        &dir, &cfg, &layout, env_cfg, a.task, a.seed, &state, &mut agent,
-    )?;
-    curves(&state.rows, &summary)
-        .render(900, 520)
-        .save_png(&dir.join("curves.png"))?;
-    if a.task == Task::DoorKey {
-        object_curves(&UpdateLog::read(&dir)?, &summary)
-            .render(900, 520)
-            .save_png(&dir.join(OBJECTS_PNG))?;
-    }
-    // The trace is environment 0's episode: test seed 0.
-    episode_picture(&layout, &trace, agent.graph(), &cfg.agent, a.task, 0)
-        .save_png(&dir.join("episode.png"))?;
+    let (summary, test, trace) = run.test()?;
+    save_pictures(&run, a.task, &summary, &trace)?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {
-        print_summary(&summary, &test, &dir);
+        print_summary(&summary, &test, run.dir());
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// Trains `run`'s remaining segments on its environments: in process, or
+/// in a sim process of the pipeline (`--pipeline`), which owns them; there
+/// a resumed run starts fresh episodes seeded by (seed, segment). Validation
+/// plays environments of its own, so it leaves the training stream
+/// untouched.
+fn train_segments(a: &TrainArgs, run: &mut TrainRun) -> anyhow::Result<()> {
+    let (envs, seed) = (run.config.agent.envs, run.segment_seed());
+    let (mut env, pipeline) = if a.pipeline {
+        let (env, p) = pipeline_env(a, envs, seed, run.dir())?;
+        (env, Some(p))
+    } else {
+        let env: Box<dyn BatchEnvironment> = Box::new(InProcess::new(
+            run.layout().clone(),
+            run.env_cfg(),
+            envs,
+            seed,
+            1,
+        )?);
+        (env, None)
+    };
+    let schedule = run.schedule();
+    let bar = crate::progress::bar(schedule.segments * schedule.iters_per_segment, "train");
+    bar.set_position(run.state.segments_done * schedule.iters_per_segment);
+    // One row per update (`updates.csv`, TensorBoard), kept up to the
+    // checkpoint the run resumes from.
+    let mut progress = Progress {
+        bar,
+        updates: UpdateLog::open(
+            run.dir(),
+            run.state.env_steps,
+            run.config.agent.kind != AgentKind::A2c,
+        )?,
+        steps_per_iter: schedule.steps_per_iter,
+        segments: schedule.segments,
+        last_validation: run.state.rows.last().map(|r| r.validation_score),
+    };
+    run.train(env.as_mut(), &mut progress)?;
+    drop(env);
+    if let Some((mut p, run_name)) = pipeline {
+        p.stop_all(std::time::Duration::from_secs(3));
+        crate::shutdown::teardown(&run_name)?;
+    }
+    progress.bar.finish_and_clear();
+    Ok(())
+}
+
+/// The run's pictures: the validation curves, Door-Key's object curves,
+/// and test seed 0's episode (the trace is environment 0's).
+fn save_pictures(
+    run: &TrainRun,
+    task: Task,
+    summary: &TestSummary,
+    trace: &EpisodeTrace,
+) -> anyhow::Result<()> {
+    let dir = run.dir();
+    curves(&run.state.rows, summary)
+        .render(900, 520)
+        .save_png(&dir.join("curves.png"))?;
+    if task == Task::DoorKey {
+        object_curves(&UpdateLog::read(dir)?, summary)
+            .render(900, 520)
+            .save_png(&dir.join(OBJECTS_PNG))?;
+    }
+    episode_picture(
+        run.layout(),
+        trace,
+        run.agent.graph(),
+        &run.config.agent,
+        task,
+        0,
+    )
+    .save_png(&dir.join("episode.png"))?;
+    Ok(())
 }
 
 /// Door-Key's picture of how the task's steps were learnt.

@@ -13,8 +13,11 @@
 //!   the agent built on them).
 //! - [`protocol`]: section 5's protocol: seed streams, segments,
 //!   checkpoints, the best checkpoint and the test summary.
+//! - [`train_run`]: a training run as a value: opened (new or resumed),
+//!   trained, tested.
 
 pub mod artefact;
 pub mod config;
 pub mod dir;
 pub mod protocol;
+pub mod train_run;
