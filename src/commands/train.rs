@@ -399,14 +399,14 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
         version: env!("CARGO_PKG_VERSION").to_string(),
         commit: env!("WORLDGRAPH_BUILD_COMMIT").to_string(),
     })?;
-    if trained != run.config.env_steps {
+    if trained != run.config().env_steps {
         eprintln!(
             "train: the budget of {} env steps rounds up to {trained}: whole segments of eval_every {} \
              rounded up to whole iterations of {} envs × {} steps",
-            run.config.env_steps,
-            run.config.eval_every,
-            run.config.agent.envs,
-            run.config.agent.rollout_len
+            run.config().env_steps,
+            run.config().eval_every,
+            run.config().agent.envs,
+            run.config().agent.rollout_len
         );
     }
     if let Some(c) = &run.agent.window_coverage() {
@@ -437,7 +437,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
 /// plays environments of its own, so it leaves the training stream
 /// untouched.
 fn train_segments(a: &TrainArgs, run: &mut TrainRun) -> anyhow::Result<()> {
-    let (envs, seed) = (run.config.agent.envs, run.segment_seed());
+    let (envs, seed) = (run.config().agent.envs, run.segment_seed());
     let (mut env, pipeline) = if a.pipeline {
         let (env, p) = pipeline_env(a, envs, seed, run.dir())?;
         (env, Some(p))
@@ -461,7 +461,7 @@ fn train_segments(a: &TrainArgs, run: &mut TrainRun) -> anyhow::Result<()> {
         updates: UpdateLog::open(
             run.dir(),
             run.state.env_steps,
-            run.config.agent.kind != AgentKind::A2c,
+            run.config().agent.kind != AgentKind::A2c,
         )?,
         steps_per_iter: schedule.steps_per_iter,
         segments: schedule.segments,
@@ -498,7 +498,7 @@ fn save_pictures(
         run.layout(),
         trace,
         run.agent.graph(),
-        &run.config.agent,
+        &run.config().agent,
         task,
         0,
     )

@@ -44,7 +44,7 @@ pub struct Rollout {
     own_net: std::sync::Mutex<Option<RustActorCritic>>,
     /// Whether the own network's weights are to be re-read before the next
     /// step (set by [`Self::start`]: an update may have changed them).
-    encoder_stale: bool,
+    weights_stale: bool,
     /// Actions `[T·B]`.
     pub actions: Vec<i64>,
     /// Rewards `[T·B]`.
@@ -76,7 +76,7 @@ impl Rollout {
             graph_logits: Vec::new(),
             graph_values: Vec::new(),
             own_net: std::sync::Mutex::new(None),
-            encoder_stale: true,
+            weights_stale: true,
             actions: Vec::new(),
             rewards: Vec::new(),
             dones: Vec::new(),
@@ -103,7 +103,7 @@ impl Rollout {
     pub fn start(&mut self, state: &LstmState) {
         self.graph_logits.clear();
         self.graph_values.clear();
-        self.encoder_stale = true;
+        self.weights_stale = true;
         self.actions.clear();
         self.rewards.clear();
         self.dones.clear();
@@ -131,7 +131,7 @@ impl Rollout {
             GradPath::RustCore => {
                 let own = current(
                     &mut self.own_net,
-                    std::mem::take(&mut self.encoder_stale),
+                    std::mem::take(&mut self.weights_stale),
                     || RustActorCritic::new(net),
                     |own| own.load(net),
                 );

@@ -64,10 +64,7 @@ pub struct RecordedLayout {
 /// The layout of the discover run in `dir`: from its identity
 /// (`config.toml`), else from its world graph (`graph.json`).
 pub fn recorded_layout(dir: &Path) -> Option<RecordedLayout> {
-    if let Some(id) = std::fs::read_to_string(dir.join("config.toml"))
-        .ok()
-        .and_then(|t| toml::from_str::<DiscoveryIdentity>(&t).ok())
-    {
+    if let Ok(id) = DiscoveryIdentity::read(dir) {
         let (w, h) = id.layout_size.split_once('x')?;
         return Some(RecordedLayout {
             name: id.layout,
@@ -122,6 +119,19 @@ pub fn check_world_graph_layout(
 }
 
 impl DiscoveryIdentity {
+    /// The identity the discover run in `dir` recorded (`config.toml`).
+    pub fn read(dir: &Path) -> anyhow::Result<DiscoveryIdentity> {
+        let path = dir.join("config.toml");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("{} is not a run identity", path.display()))
+    }
+
+    /// The discovery settings the run was started with.
+    pub fn config(&self) -> &DiscoveryConfig {
+        &self.discovery
+    }
+
     /// The identity of a discovery on `layout` with `envs` environments.
     pub fn new(layout: &Layout, envs: usize, cfg: &DiscoveryConfig) -> DiscoveryIdentity {
         let mut identity = cfg.clone();

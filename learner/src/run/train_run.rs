@@ -28,8 +28,8 @@ pub const LAYOUT_FILE: &str = "layout.txt";
 pub struct TrainSpec {
     /// The run directory (new, empty, or a run of this spec to resume).
     pub dir: PathBuf,
-    /// The settings, overrides applied and checked; `0 = auto` values are
-    /// resolved by [`TrainRun::open`].
+    /// The settings, overrides applied and checked; [`TrainRun::open`]
+    /// resolves their `0 = auto` values in place.
     pub config: TrainConfig,
     /// The maze.
     pub layout: Layout,
@@ -57,9 +57,8 @@ pub struct TrainSpec {
 /// An open training run: its directory locked, its files written, its
 /// agent built (and its weights loaded when resumed).
 pub struct TrainRun {
+    /// What the run is, its settings resolved (as written to `config.toml`).
     spec: TrainSpec,
-    /// The settings with `0 = auto` resolved (as written to `config.toml`).
-    pub config: TrainConfig,
     /// The agent.
     pub agent: HrlAgent,
     /// Where the protocol stands.
@@ -74,7 +73,7 @@ impl TrainRun {
     /// this run: another run's directory, a resumed run with other
     /// settings, or a budget below what it already trained are refused
     /// with the reason.
-    pub fn open(spec: TrainSpec) -> anyhow::Result<TrainRun> {
+    pub fn open(mut spec: TrainSpec) -> anyhow::Result<TrainRun> {
         let dir = spec.dir.clone();
         check("--run", &dir, RunKind::Train, &spec.own_files)?;
         let mut agent = build_agent(
@@ -86,8 +85,8 @@ impl TrainRun {
         )?;
         // The run's files and identity hold what `0 = auto` resolved to.
         let auto = auto_values(&spec.config.agent, Some(&agent), &spec.layout);
-        let mut config = spec.config.clone();
-        config.agent = resolve_auto(&config.agent, auto);
+        spec.config.agent = resolve_auto(&spec.config.agent, auto);
+        let config = &spec.config;
         let identity = RunIdentity {
             maze: spec.layout.name.clone(),
             task: spec.task,
@@ -114,7 +113,7 @@ impl TrainRun {
             }
             Ok(Some(old))
         };
-        let trained = trained_env_steps(&config);
+        let trained = trained_env_steps(config);
         if let Some(old) = read_state()?
             && old.env_steps > trained
         {
@@ -131,7 +130,7 @@ impl TrainRun {
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create {}", dir.display()))?;
         let lock = lock(&dir, "train")?;
-        write_files(&spec, &config)?;
+        write_files(&spec)?;
         let mut state = RunState {
             identity: identity.clone(),
             segments_done: 0,
@@ -151,12 +150,16 @@ impl TrainRun {
         };
         Ok(TrainRun {
             spec,
-            config,
             agent,
             state,
             resumed,
             _lock: lock,
         })
+    }
+
+    /// The settings, `0 = auto` resolved (as in `config.toml`).
+    pub fn config(&self) -> &TrainConfig {
+        &self.spec.config
     }
 
     /// The run directory.
@@ -182,7 +185,7 @@ impl TrainRun {
 
     /// The run's segments and iterations.
     pub fn schedule(&self) -> Schedule {
-        Schedule::of(&self.config)
+        Schedule::of(&self.spec.config)
     }
 
     /// Whether segments are left to train.
@@ -213,7 +216,7 @@ impl TrainRun {
         }
         protocol::train_segments(
             &dir,
-            &self.config,
+            &self.spec.config,
             &self.spec.layout,
             self.spec.env_cfg,
             &mut self.state,
@@ -228,7 +231,7 @@ impl TrainRun {
     pub fn test(&mut self) -> anyhow::Result<(TestSummary, EvalResult, EpisodeTrace)> {
         protocol::test(
             &self.spec.dir,
-            &self.config,
+            &self.spec.config,
             &self.spec.layout,
             self.spec.env_cfg,
             self.spec.task,
@@ -242,8 +245,8 @@ impl TrainRun {
 /// The run's own files: `config.toml` (resolved), the layout file's copy,
 /// `seeds.json` (the protocol's streams) and `invocations.txt` (what made
 /// the run).
-fn write_files(spec: &TrainSpec, config: &TrainConfig) -> anyhow::Result<()> {
-    let dir = &spec.dir;
+fn write_files(spec: &TrainSpec) -> anyhow::Result<()> {
+    let (dir, config) = (&spec.dir, &spec.config);
     write_atomic(
         &dir.join("config.toml"),
         toml::to_string(config)?.as_bytes(),

@@ -24,7 +24,7 @@ use clap::Args;
 use sim::atomic_file::write_atomic;
 use sim::{Maze, Task};
 
-use learner::a2c::rollout::GradPath;
+use learner::run::artefact::DiscoveryIdentity;
 use learner::run::config::TrainConfig;
 use learner::run::protocol::TestSummary;
 mod cell;
@@ -379,7 +379,12 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
                 grid: plan.grid_label.clone(),
                 summary,
                 commit: plan.commit.clone(),
-                grad_path: discovery_grad_path(&dir)?.name().to_string(),
+                grad_path: DiscoveryIdentity::read(&dir)?
+                    .config()
+                    .gcp
+                    .grad_path
+                    .name()
+                    .to_string(),
             };
             let path = discover_path(&plan.results, &spec.maze, spec.seed);
             write_result(&path, &serde_json::to_vec_pretty(&r)?)
@@ -472,27 +477,6 @@ fn run_result(
         jobs: plan.jobs,
         commit: plan.commit.clone(),
         grad_path,
-    }
-}
-
-/// The gradient path a discovery run's `π_g` trained on, from its
-/// `config.toml` (`discovery.gcp.grad_path`; absent: the production path).
-fn discovery_grad_path(dir: &Path) -> anyhow::Result<GradPath> {
-    let path = dir.join("config.toml");
-    let table: toml::Table = toml::from_str(
-        &std::fs::read_to_string(&path)
-            .with_context(|| format!("cannot read {}", path.display()))?,
-    )
-    .with_context(|| format!("{} is not TOML", path.display()))?;
-    let name = table
-        .get("discovery")
-        .and_then(|d| d.get("gcp"))
-        .and_then(|g| g.get("grad_path"))
-        .and_then(|v| v.as_str());
-    match name {
-        None => Ok(GradPath::RustCore),
-        Some(n) => GradPath::from_name(n)
-            .with_context(|| format!("{}: unknown gradient path {n:?}", path.display())),
     }
 }
 
