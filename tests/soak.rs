@@ -75,6 +75,16 @@ fn soak_with_a_training_learner_resumes_after_kills() {
     assert!(left.is_empty(), "left in /dev/shm: {left:?}");
 
     let kills = report["recoveries"].as_array().unwrap();
+    // The kill clock starts once the pipeline flows, so the first kill (the
+    // learner's) finds a learner that has trained, however slow the start.
+    let flowed = report["flowed_after_s"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("the pipeline never flowed: {report}"));
+    let first_kill = kills[0]["at_s"].as_f64().unwrap();
+    assert!(
+        first_kill >= flowed + 6.0,
+        "first kill {first_kill} s, flowing from {flowed} s"
+    );
     let learner_kills: Vec<_> = kills.iter().filter(|k| k["role"] == "learner").collect();
     assert!(!learner_kills.is_empty(), "no learner kill: {report}");
     assert!(

@@ -16,8 +16,13 @@
 //!   of each minute), so restarts do not hide a minute.
 //! - **Shared memory left behind**: the run's `/dev/shm` files after teardown.
 //!
+//! Kills begin once the pipeline flows (the sim publishes and, with
+//! `--learner-trains`, the learner has finished an iteration), so a slow
+//! start on a loaded machine does not turn the first kill into a kill of a
+//! process still loading.
+//!
 //! Exits non-zero when anything was lost, reordered, leaked or left behind,
-//! or a recovery failed.
+//! a recovery failed, or the pipeline never flowed.
 
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -33,6 +38,7 @@ use super::soak_report::{KillCost, Recovery, SoakReport};
 use crate::pipeline::Role;
 use crate::pipeline::RunCmdArgs;
 use crate::roles::learner::PolicyKind;
+use crate::roles::learner_train::TRAIN_LOG;
 use crate::roles::planner::GraphArgs;
 use crate::roles::rss_kib;
 use crate::roles::{OnPeerDeath, RunArgs};
@@ -75,7 +81,9 @@ pub struct SoakArgs {
     #[arg(long, default_value_t = 10.0)]
     pub minutes: f64,
     /// SIGKILL a random process (sim, learner or planner) every this many
-    /// seconds; none in the last 5 seconds, and the soak waits for the
+    /// seconds, the first this long after the pipeline flows (the sim
+    /// publishes and, with --learner-trains, the learner has finished an
+    /// iteration); none in the last 5 seconds, and the soak waits for the
     /// recovery of its last kill.
     #[arg(long)]
     pub kill_every: Option<f64>,
@@ -129,170 +137,340 @@ fn last_progress(path: &Path) -> Option<SimProgress> {
     Some((v["pid"].as_u64()? as u32, v["seq"].as_u64()?))
 }
 
+/// Whether the pipeline flows: the sim has published (a progress line in
+/// `sim.stats.jsonl`) and, when the learner trains, it has finished an
+/// iteration (`learner-train.jsonl`). The kill clock starts then, so that
+/// the first kill finds processes at work rather than still loading.
+fn pipeline_flows(stats: &Path, train_log: Option<&Path>) -> bool {
+    let learner_ready = train_log.is_none_or(|log| {
+        std::fs::File::open(log).is_ok_and(|f| {
+            std::io::BufReader::new(f)
+                .lines()
+                .map_while(Result::ok)
+                .any(|l| l.contains("\"event\":\"iteration\""))
+        })
+    });
+    learner_ready && last_progress(stats).is_some()
+}
+
 /// Runs the soak.
 pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(a.minutes > 0.0, "--minutes must be positive");
     if let Some(k) = a.kill_every {
         anyhow::ensure!(k >= 2.0, "--kill-every must be at least 2 seconds");
     }
-    let slices = a.slices.unwrap_or(if a.learner_trains { 1 } else { 2 });
-    let run = format!("soak-{}", std::process::id());
-    let dir = a
-        .run_dir
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("runs").join(&run));
-    let args = RunCmdArgs {
-        world: a.world.clone(),
-        graph: GraphArgs {
-            nodes: 32,
-            node_file: None,
-            walks_per_node: 128,
-            walk_len: 64,
-            graph_seed: None,
-            no_shorten: false,
-        },
-        run: RunArgs {
-            run: run.clone(),
-            run_dir: Some(dir.clone()),
-            on_peer_death: OnPeerDeath::Wait,
-            duration: None,
-            cpu: None,
-        },
-        envs: a.envs,
-        slices,
-        threads: 1,
-        policy: if a.learner_trains {
-            PolicyKind::TrainGcp
-        } else {
-            PolicyKind::Random
-        },
-        route_every: if a.learner_trains { 0 } else { a.route_every },
-        checkpoint_every: a.checkpoint_every,
-        logs_to_files: true,
-        pin: false,
-    };
-    args.validate()?;
     let stop = stop_flag()?;
-    let mut p = args.pipeline()?;
-    p.start_all()?;
-    let start = Instant::now();
-    let start_unix_ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64);
-    let end = start + Duration::from_secs_f64(a.minutes * 60.0);
-    let mut rng = SmallRng::seed_from_u64(a.world.seed);
-    let mut next_kill = a.kill_every.map(|k| start + Duration::from_secs_f64(k));
-    // The kill awaiting its recovery: its index in `recoveries`, when, and
-    // the sim's progress just before it.
-    let mut pending: Option<(usize, Instant, Option<SimProgress>)> = None;
-    let mut recoveries: Vec<Recovery> = Vec::new();
-    let mut mem: BTreeMap<(Role, u32), ProcMem> = BTreeMap::new();
-    let mut next_sample = start;
-    let stats = dir.join("sim.stats.jsonl");
-    let bar = indicatif::ProgressBar::new((a.minutes * 60.0) as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("soak {bar:40} {pos}/{len} s  {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    let mut soak = Soak::start(a)?;
     // Past the end, the soak only waits for the recovery of its last kill.
-    while (Instant::now() < end || pending.is_some()) && !stop.load(Ordering::Relaxed) {
+    while soak.goes_on() && !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
+        soak.tick()?;
+    }
+    let (report, dir, json) = soak.finish()?;
+    sim::atomic_file::write_atomic(
+        &dir.join("soak.report.json"),
+        &serde_json::to_vec_pretty(&report)?,
+    )?;
+    if json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_report(&report, &dir);
+    }
+    Ok(if report.ok {
+        std::process::ExitCode::SUCCESS
+    } else {
+        std::process::ExitCode::FAILURE
+    })
+}
+
+/// A kill awaiting its recovery: its index in the recoveries, when it was
+/// made, and the sim's progress just before it.
+type Pending = (usize, Instant, Option<SimProgress>);
+
+/// A soak under way: the pipeline, its kill schedule, the kills made and
+/// the memory samples taken.
+struct Soak {
+    a: SoakArgs,
+    run: String,
+    dir: PathBuf,
+    p: crate::pipeline::Pipeline,
+    start: Instant,
+    start_unix_ms: u64,
+    end: Instant,
+    rng: SmallRng,
+    /// When the pipeline first flowed ([`pipeline_flows`]).
+    flowing_since: Option<Instant>,
+    next_kill: Option<Instant>,
+    pending: Option<Pending>,
+    recoveries: Vec<Recovery>,
+    mem: BTreeMap<(Role, u32), ProcMem>,
+    next_sample: Instant,
+    bar: indicatif::ProgressBar,
+}
+
+impl Soak {
+    /// Starts the three processes in a fresh run directory.
+    fn start(a: SoakArgs) -> anyhow::Result<Self> {
+        let run = format!("soak-{}", std::process::id());
+        let dir = a
+            .run_dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("runs").join(&run));
+        let args = RunCmdArgs {
+            world: a.world.clone(),
+            graph: GraphArgs {
+                nodes: 32,
+                node_file: None,
+                walks_per_node: 128,
+                walk_len: 64,
+                graph_seed: None,
+                no_shorten: false,
+            },
+            run: RunArgs {
+                run: run.clone(),
+                run_dir: Some(dir.clone()),
+                on_peer_death: OnPeerDeath::Wait,
+                duration: None,
+                cpu: None,
+            },
+            envs: a.envs,
+            slices: a.slices.unwrap_or(if a.learner_trains { 1 } else { 2 }),
+            threads: 1,
+            policy: if a.learner_trains {
+                PolicyKind::TrainGcp
+            } else {
+                PolicyKind::Random
+            },
+            route_every: if a.learner_trains { 0 } else { a.route_every },
+            checkpoint_every: a.checkpoint_every,
+            logs_to_files: true,
+            pin: false,
+        };
+        args.validate()?;
+        let mut p = args.pipeline()?;
+        p.start_all()?;
+        let start = Instant::now();
+        let start_unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        let bar = indicatif::ProgressBar::new((a.minutes * 60.0) as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("soak {bar:40} {pos}/{len} s  {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        Ok(Self {
+            end: start + Duration::from_secs_f64(a.minutes * 60.0),
+            rng: SmallRng::seed_from_u64(a.world.seed),
+            a,
+            run,
+            dir,
+            p,
+            start,
+            start_unix_ms,
+            flowing_since: None,
+            next_kill: None,
+            pending: None,
+            recoveries: Vec::new(),
+            mem: BTreeMap::new(),
+            next_sample: start,
+            bar,
+        })
+    }
+
+    fn stats(&self) -> PathBuf {
+        self.dir.join("sim.stats.jsonl")
+    }
+
+    /// Until the end, and past it until the last kill's recovery.
+    fn goes_on(&self) -> bool {
+        Instant::now() < self.end || self.pending.is_some()
+    }
+
+    /// One look at the pipeline: restart what exited, sample memory, settle
+    /// a pending recovery, start the kill clock once the pipeline flows,
+    /// and kill when a kill is due.
+    fn tick(&mut self) -> anyhow::Result<()> {
         let now = Instant::now();
-        for (role, status) in p.poll_exited() {
-            bar.println(format!(
+        for (role, status) in self.p.poll_exited() {
+            self.bar.println(format!(
                 "soak: the {} process exited ({status}); restarting it",
                 role.name()
             ));
-            p.spawn(role)?;
+            self.p.spawn(role)?;
         }
-        if now >= next_sample {
-            next_sample = now + Duration::from_secs(1);
-            for role in Role::ALL {
-                if let Some(pid) = p.pid(role)
-                    && let Some(rss) = rss_kib(pid)
-                {
-                    let m = mem.entry((role, pid)).or_default();
-                    let born = *m.started.get_or_insert(now);
-                    if m.baseline.is_none() && now - born >= Duration::from_secs(30) {
-                        m.baseline = Some(rss);
-                    }
-                    m.last = rss;
-                    m.max = m.max.max(rss);
-                }
-            }
-            bar.set_position((now - start).as_secs());
-            // No bar on a non-terminal stderr: a line every 10 s instead.
-            let secs = (now - start).as_secs();
-            if secs > 0
-                && secs.is_multiple_of(10)
-                && !std::io::IsTerminal::is_terminal(&std::io::stderr())
-            {
-                // (A kill is in `recoveries` from the moment it is made.)
-                eprintln!("soak: {secs} s, kills {}", recoveries.len());
-            }
-            bar.set_message(format!("kills {}", recoveries.len()));
+        if now >= self.next_sample {
+            self.next_sample = now + Duration::from_secs(1);
+            self.sample(now);
         }
-        // A pending recovery: batches flow again once the sim's progress
-        // moved past what it was right after the restart.
-        if let Some((i, killed_at, before)) = pending {
-            let progress = last_progress(&stats);
-            let moved = match (before, progress) {
-                (Some((pid0, seq0)), Some((pid1, seq1))) => pid1 != pid0 || seq1 > seq0 + 2,
-                (None, Some(_)) => true,
-                _ => false,
-            };
-            // A restarted sim appends from seq 0: any two lines of it count.
-            if moved && now - killed_at > Duration::from_millis(300) {
-                let settle = last_progress(&stats);
-                std::thread::sleep(Duration::from_millis(300));
-                if last_progress(&stats) != settle {
-                    recoveries[i].recovered_after_s =
-                        Some((Instant::now() - killed_at).as_secs_f64());
-                    pending = None;
-                }
-            } else if now - killed_at > RECOVERY_LIMIT {
-                bar.println(format!(
-                    "soak: no recovery within {RECOVERY_LIMIT:?} after killing the {}",
-                    recoveries[i].role.name()
-                ));
-                pending = None;
+        self.settle_recovery(now);
+        if self.flowing_since.is_none() {
+            let train_log = self.a.learner_trains.then(|| self.dir.join(TRAIN_LOG));
+            if pipeline_flows(&self.stats(), train_log.as_deref()) {
+                self.flowing_since = Some(now);
+                self.next_kill = self.a.kill_every.map(|k| now + Duration::from_secs_f64(k));
             }
         }
-        if pending.is_none()
-            && let Some(k) = next_kill
-            && now >= k
-            && kill_allowed((now - start).as_secs_f64(), a.minutes * 60.0)
+        if self.pending.is_none()
+            && self.next_kill.is_some_and(|k| now >= k)
+            && kill_allowed((now - self.start).as_secs_f64(), self.a.minutes * 60.0)
         {
-            let role = Role::ALL[rng.random_range(0..Role::ALL.len())];
-            let before = last_progress(&stats);
-            let pid = p.pid(role);
-            p.kill_hard(role)?;
-            let killed_at = Instant::now();
-            bar.println(format!(
-                "soak: {:>6.1} s  SIGKILL {}",
-                (killed_at - start).as_secs_f64(),
-                role.name()
+            self.kill()?;
+        }
+        Ok(())
+    }
+
+    /// Each process's resident set, and the progress bar.
+    fn sample(&mut self, now: Instant) {
+        for role in Role::ALL {
+            if let Some(pid) = self.p.pid(role)
+                && let Some(rss) = rss_kib(pid)
+            {
+                let m = self.mem.entry((role, pid)).or_default();
+                let born = *m.started.get_or_insert(now);
+                if m.baseline.is_none() && now - born >= Duration::from_secs(30) {
+                    m.baseline = Some(rss);
+                }
+                m.last = rss;
+                m.max = m.max.max(rss);
+            }
+        }
+        self.bar.set_position((now - self.start).as_secs());
+        // No bar on a non-terminal stderr: a line every 10 s instead.
+        let secs = (now - self.start).as_secs();
+        if secs > 0
+            && secs.is_multiple_of(10)
+            && !std::io::IsTerminal::is_terminal(&std::io::stderr())
+        {
+            // (A kill is in `recoveries` from the moment it is made.)
+            eprintln!("soak: {secs} s, kills {}", self.recoveries.len());
+        }
+        self.bar
+            .set_message(format!("kills {}", self.recoveries.len()));
+    }
+
+    /// A pending recovery: batches flow again once the sim's progress moved
+    /// past what it was right after the restart.
+    fn settle_recovery(&mut self, now: Instant) {
+        let Some((i, killed_at, before)) = self.pending else {
+            return;
+        };
+        let stats = self.stats();
+        let moved = match (before, last_progress(&stats)) {
+            (Some((pid0, seq0)), Some((pid1, seq1))) => pid1 != pid0 || seq1 > seq0 + 2,
+            (None, Some(_)) => true,
+            _ => false,
+        };
+        // A restarted sim appends from seq 0: any two lines of it count.
+        if moved && now - killed_at > Duration::from_millis(300) {
+            let settle = last_progress(&stats);
+            std::thread::sleep(Duration::from_millis(300));
+            if last_progress(&stats) != settle {
+                self.recoveries[i].recovered_after_s = Some(killed_at.elapsed().as_secs_f64());
+                self.pending = None;
+            }
+        } else if now - killed_at > RECOVERY_LIMIT {
+            self.bar.println(format!(
+                "soak: no recovery within {RECOVERY_LIMIT:?} after killing the {}",
+                self.recoveries[i].role.name()
             ));
-            p.spawn(role)?;
-            recoveries.push(Recovery {
-                at_s: (killed_at - start).as_secs_f64(),
-                role,
-                pid,
-                recovered_after_s: None,
-                training: None,
-            });
-            pending = Some((recoveries.len() - 1, killed_at, before));
-            next_kill = a.kill_every.map(|s| killed_at + Duration::from_secs_f64(s));
+            self.pending = None;
         }
     }
-    bar.finish_and_clear();
-    p.stop_all(Duration::from_secs(5));
-    let left: Vec<String> = teardown(&run)?
-        .iter()
-        .map(|p| p.display().to_string())
-        .collect();
 
-    // Lost / reordered: the last line of every learner process.
+    /// SIGKILLs a random process and restarts it.
+    fn kill(&mut self) -> anyhow::Result<()> {
+        let role = Role::ALL[self.rng.random_range(0..Role::ALL.len())];
+        let before = last_progress(&self.stats());
+        let pid = self.p.pid(role);
+        self.p.kill_hard(role)?;
+        let killed_at = Instant::now();
+        self.bar.println(format!(
+            "soak: {:>6.1} s  SIGKILL {}",
+            (killed_at - self.start).as_secs_f64(),
+            role.name()
+        ));
+        self.p.spawn(role)?;
+        self.recoveries.push(Recovery {
+            at_s: (killed_at - self.start).as_secs_f64(),
+            role,
+            pid,
+            recovered_after_s: None,
+            training: None,
+        });
+        self.pending = Some((self.recoveries.len() - 1, killed_at, before));
+        self.next_kill = self
+            .a
+            .kill_every
+            .map(|s| killed_at + Duration::from_secs_f64(s));
+        Ok(())
+    }
+
+    /// Stops the processes, tears the run's shared memory down and reads
+    /// the report out of the logs. Returns it with the run directory and
+    /// whether it is wanted as JSON.
+    fn finish(mut self) -> anyhow::Result<(SoakReport, PathBuf, bool)> {
+        self.bar.finish_and_clear();
+        self.p.stop_all(Duration::from_secs(5));
+        let left: Vec<String> = teardown(&self.run)?
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        let (lost, reordered, sim_restarts_seen) = stream_counts(&self.dir);
+        let (batches, per_minute, worst_per_minute) =
+            sim_figures(&self.stats(), self.start_unix_ms);
+        let (growth, max_rss) = memory_figures(&self.mem);
+        let a = &self.a;
+        let training = a.learner_trains.then(|| {
+            super::soak_training::analyse(
+                &self.dir,
+                &mut self.recoveries,
+                self.start_unix_ms,
+                &a.world,
+                a.envs,
+                a.checkpoint_every,
+            )
+        });
+        let trained = training
+            .as_ref()
+            .is_none_or(|t| t.final_checkpoint_error.is_none() && t.iterations_kept > 0);
+        let failed_recoveries = self
+            .recoveries
+            .iter()
+            .filter(|r| r.recovered_after_s.is_none())
+            .count();
+        let leaked = growth.values().any(|&g| g > RSS_GROWTH_LIMIT_KIB);
+        let flowed_after_s = self.flowing_since.map(|t| (t - self.start).as_secs_f64());
+        let ok = lost == 0
+            && reordered == 0
+            && left.is_empty()
+            && !leaked
+            && failed_recoveries == 0
+            && trained
+            && batches > 0
+            && flowed_after_s.is_some();
+        let report = SoakReport {
+            minutes: self.start.elapsed().as_secs_f64() / 60.0,
+            flowed_after_s,
+            batches,
+            lost,
+            reordered,
+            sim_restarts_seen,
+            recoveries: self.recoveries,
+            rss_growth_kib: growth,
+            rss_max_kib: max_rss,
+            roundtrip_p99_us_per_minute: per_minute,
+            roundtrip_p99_us_worst_interval_per_minute: worst_per_minute,
+            shm_left_behind: left,
+            training,
+            ok,
+        };
+        Ok((report, self.dir, self.a.json))
+    }
+}
+
+/// Lost, reordered and sim restarts seen: the last line of every learner
+/// process's stream accounting (`learner.stream.jsonl`), summed.
+fn stream_counts(dir: &Path) -> (u64, u64, u64) {
     let mut per_pid: BTreeMap<u64, serde_json::Value> = BTreeMap::new();
     if let Ok(f) = std::fs::File::open(dir.join("learner.stream.jsonl")) {
         for l in std::io::BufReader::new(f).lines().map_while(Result::ok) {
@@ -309,12 +487,15 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             .map(|s| s[k].as_u64().unwrap_or(0))
             .sum::<u64>()
     };
-    let (lost, reordered, sim_restarts_seen) = (sum("lost"), sum("reordered"), sum("sim_restarts"));
+    (sum("lost"), sum("reordered"), sum("sim_restarts"))
+}
 
-    let mut batches = 0u64;
+/// Batches published by all sim processes, and per soak minute the median
+/// and the worst of the sims' 250 ms round-trip p99s, from `sim.stats.jsonl`.
+fn sim_figures(stats: &Path, start_unix_ms: u64) -> (u64, Vec<f64>, Vec<f64>) {
     let mut last_seq: BTreeMap<u64, u64> = BTreeMap::new();
     let mut minutes: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-    if let Ok(f) = std::fs::File::open(&stats) {
+    if let Ok(f) = std::fs::File::open(stats) {
         for l in std::io::BufReader::new(f).lines().map_while(Result::ok) {
             if let Ok(v) = serde_json::from_str::<serde_json::Value>(&l) {
                 last_seq.insert(
@@ -339,10 +520,18 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
         per_minute.push(v[v.len() / 2]);
         worst_per_minute.push(v[v.len() - 1]);
     }
-    batches += last_seq.values().map(|s| s + 1).sum::<u64>();
+    let batches = last_seq.values().map(|s| s + 1).sum::<u64>();
+    (batches, per_minute, worst_per_minute)
+}
+
+/// Per role: the largest resident-set growth over processes that lived at
+/// least 60 s, and the largest resident set (KiB).
+fn memory_figures(
+    mem: &BTreeMap<(Role, u32), ProcMem>,
+) -> (BTreeMap<String, i64>, BTreeMap<String, u64>) {
     let mut growth: BTreeMap<String, i64> = BTreeMap::new();
     let mut max_rss: BTreeMap<String, u64> = BTreeMap::new();
-    for ((role, _), m) in &mem {
+    for ((role, _), m) in mem {
         let e = max_rss.entry(role.name().into()).or_default();
         *e = (*e).max(m.max);
         if let (Some(b), Some(st)) = (m.baseline, m.started)
@@ -352,65 +541,16 @@ pub fn run(a: SoakArgs) -> anyhow::Result<std::process::ExitCode> {
             *g = (*g).max(m.last as i64 - b as i64);
         }
     }
-    let training = a.learner_trains.then(|| {
-        super::soak_training::analyse(
-            &dir,
-            &mut recoveries,
-            start_unix_ms,
-            &a.world,
-            a.envs,
-            a.checkpoint_every,
-        )
-    });
-    let trained = training
-        .as_ref()
-        .is_none_or(|t| t.final_checkpoint_error.is_none() && t.iterations_kept > 0);
-    let failed_recoveries = recoveries
-        .iter()
-        .filter(|r| r.recovered_after_s.is_none())
-        .count();
-    let leaked = growth.values().any(|&g| g > RSS_GROWTH_LIMIT_KIB);
-    let ok = lost == 0
-        && reordered == 0
-        && left.is_empty()
-        && !leaked
-        && failed_recoveries == 0
-        && trained
-        && batches > 0;
-    let report = SoakReport {
-        minutes: (Instant::now() - start).as_secs_f64() / 60.0,
-        batches,
-        lost,
-        reordered,
-        sim_restarts_seen,
-        recoveries,
-        rss_growth_kib: growth,
-        rss_max_kib: max_rss,
-        roundtrip_p99_us_per_minute: per_minute,
-        roundtrip_p99_us_worst_interval_per_minute: worst_per_minute,
-        shm_left_behind: left,
-        training,
-        ok,
-    };
-    sim::atomic_file::write_atomic(
-        &dir.join("soak.report.json"),
-        &serde_json::to_vec_pretty(&report)?,
-    )?;
-    if a.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print_report(&report, &dir);
-    }
-    Ok(if ok {
-        std::process::ExitCode::SUCCESS
-    } else {
-        std::process::ExitCode::FAILURE
-    })
+    (growth, max_rss)
 }
 
 fn print_report(r: &SoakReport, dir: &Path) {
     println!("soak report ({})", dir.display());
     println!("  {:<34} {:>12.1}", "minutes", r.minutes);
+    match r.flowed_after_s {
+        Some(s) => println!("  {:<34} {:>12.1}", "pipeline flowing after (s)", s),
+        None => println!("  pipeline NEVER flowed (no kill was made)"),
+    }
     println!("  {:<34} {:>12}", "batches published", r.batches);
     println!("  {:<34} {:>12}", "batches lost", r.lost);
     println!("  {:<34} {:>12}", "batches reordered", r.reordered);

@@ -32,6 +32,10 @@ pub struct Recovery {
 pub struct SoakReport {
     /// Minutes run.
     pub minutes: f64,
+    /// Seconds from the start until the pipeline flowed (the sim published
+    /// and, with --learner-trains, the learner finished an iteration); the
+    /// kill clock starts then. None: it never did, and the soak fails.
+    pub flowed_after_s: Option<f64>,
     /// Batches published by all sim processes.
     pub batches: u64,
     /// Batches lost (learner streams).
