@@ -73,7 +73,7 @@ enum Command {
     /// seeds score it), resumable, with curves and an episode picture.
     Train(commands::train::TrainArgs),
     /// Score a `train` run's best checkpoint on any range of test seeds.
-    Evaluate(commands::train::EvaluateArgs),
+    Evaluate(commands::evaluate::EvaluateArgs),
     /// The paper's ablation study: a grid of (maze, task, agent, seed) runs,
     /// side by side here or as SLURM job arrays (--slurm), resumable, each
     /// summary written under `results/`.
@@ -120,7 +120,7 @@ fn run() -> anyhow::Result<ExitCode> {
         Command::Discover(a) => commands::discover::run(a),
         Command::Soak(a) => commands::soak::run(a),
         Command::Train(a) => commands::train::run(a),
-        Command::Evaluate(a) => commands::train::evaluate(a),
+        Command::Evaluate(a) => commands::evaluate::evaluate(a),
         Command::Experiment(a) => commands::experiment::run(a),
         Command::Table(a) => commands::table::run(a),
         Command::Sim(cmd) => commands::sim::run(cmd),

@@ -8,9 +8,11 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use learner::batch_env::{BatchEnvironment, InProcess};
-use learner::discovery::{Discovery, DiscoveryConfig, RoundStats};
-use learner::run::artefact::{DiscoveryIdentity, read_discovery_config};
+use learner::discovery::{DiscoveryConfig, RoundStats};
+use learner::edge_refinement::RefinementStats;
+use learner::run::artefact::read_discovery_config;
 use learner::run::dir;
+use learner::run::discovery_run::{DiscoveryRun, DiscoverySpec};
 use serde::Serialize;
 use sim::{Layout, Maze, Task};
 
@@ -159,11 +161,92 @@ const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
 
 /// Runs `worldgraph discover`.
 pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
+    let cfg = resolved_config(&a)?;
+    anyhow::ensure!(
+        (1..=MAX_ENVS).contains(&a.envs),
+        "--envs {}: from 1 to {MAX_ENVS} environments",
+        a.envs
+    );
+    let seed = cfg.seed;
+    let w = world(&a, seed);
+    let (layout, env_cfg) = w.build()?;
+    // One world graph per maze serves every task on it: it is found on the
+    // maze's structure, doors passable and no key (a Door-Key layout's
+    // door is refused at run time only while it is closed).
+    let layout = layout.structural();
+    let dir = a.run_dir.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, seed))
+    });
+    let own_files: Vec<String> = a
+        .config
+        .as_deref()
+        .and_then(|c| dir::name_in(&dir, c))
+        .into_iter()
+        .chain(["lock".to_string()])
+        .collect();
+    let mut run = DiscoveryRun::open(DiscoverySpec {
+        dir,
+        layout: layout.clone(),
+        envs: a.envs,
+        config: cfg,
+        num_actions: env_cfg.task.num_actions(),
+        own_files,
+    })?;
+    if let Some(rounds) = run.resumed_after() {
+        eprintln!(
+            "discover: resuming {} after round {rounds}",
+            run.dir().display()
+        );
+    }
+    let mut transport = Transport::open(&a, &w, &layout, env_cfg, seed, run.dir())?;
+    discover_rounds(&mut run, transport.env.as_mut())?;
+    let gcp_success = run
+        .discovery()
+        .evaluate_gcp(transport.env.as_mut(), 10, 200)?;
+    let transport_name = transport.name;
+    transport.close()?;
+
+    // The world graph over V_p: built here, or by the planner process.
+    let (cells, pivotal_file) = run.write_pivotal_states()?;
+    let (graph, refinement) = if a.pipeline {
+        // Edges walked by the planner process, then each path shortened
+        // by π_g where it reaches the next node faster.
+        let mut g = build_graph_in_planner(&a, &w, run.dir(), &pivotal_file)?;
+        let stats = run.discovery().refine_graph(&mut g)?;
+        (g, stats)
+    } else {
+        run.discovery().build_graph(Task::MultiGoal)?
+    };
+    run.save_world_graph(&graph)?;
+    let summary = summarise(
+        &mut run,
+        &graph,
+        &refinement,
+        gcp_success,
+        transport_name,
+        cells,
+    )?;
+    let dir = run.dir();
+    sim::atomic_file::write_atomic(
+        &dir.join("discovery.json"),
+        &serde_json::to_vec_pretty(&summary)?,
+    )?;
+    save_pictures(&mut run, &graph, seed)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        print_summary(&summary, run.dir());
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// The discovery settings: the `--config` file's (or the defaults), each
+/// flag given overriding it; a flag not given keeps the file's value.
+fn resolved_config(a: &DiscoverArgs) -> anyhow::Result<DiscoveryConfig> {
     let mut cfg: DiscoveryConfig = match &a.config {
         Some(p) => read_discovery_config(p)?,
         None => DiscoveryConfig::default(),
     };
-    // A flag given overrides the file; a flag not given keeps the file's value.
     if let Some(s) = a.seed {
         cfg.seed = s;
     }
@@ -176,58 +259,59 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(g) = a.gcp_iters {
         cfg.gcp_iters_per_round = g;
     }
-    let seed = cfg.seed;
-    anyhow::ensure!(
-        (1..=MAX_ENVS).contains(&a.envs),
-        "--envs {}: from 1 to {MAX_ENVS} environments",
-        a.envs
-    );
-    let w = world(&a, seed);
-    let (layout, env_cfg) = w.build()?;
-    // One world graph per maze serves every task on it: it is found on the
-    // maze's structure, doors passable and no key (a Door-Key layout's
-    // door is refused at run time only while it is closed).
-    let layout = layout.structural();
-    let dir = a.run_dir.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, cfg.seed))
-    });
-    let own: Vec<String> = a
-        .config
-        .as_deref()
-        .and_then(|c| dir::name_in(&dir, c))
-        .into_iter()
-        .chain(["lock".to_string()])
-        .collect();
-    dir::check("--run", &dir, dir::RunKind::Discover, &own)?;
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let _lock = dir::lock(&dir, "discover")?;
-    DiscoveryIdentity::new(&layout, a.envs, &cfg).check_and_record(&dir)?;
-    let num_actions = env_cfg.task.num_actions();
-    let mut disc = Discovery::new(cfg, &layout, a.envs, num_actions)?;
-    let ckpt = dir.join("checkpoint");
-    if disc.resume(&ckpt)? {
-        eprintln!(
-            "discover: resuming {} after round {}",
-            dir.display(),
-            disc.rounds_done()
-        );
+    Ok(cfg)
+}
+
+/// Where the discovery's environments run: in this process, or in a sim
+/// process of the pipeline (`--pipeline`), which [`Transport::close`]
+/// stops and tears down.
+struct Transport {
+    env: Box<dyn BatchEnvironment>,
+    pipeline: Option<(Pipeline, String)>,
+    /// As the summary names it.
+    name: &'static str,
+}
+
+impl Transport {
+    fn open(
+        a: &DiscoverArgs,
+        w: &WorldArgs,
+        layout: &Layout,
+        env_cfg: sim::EnvConfig,
+        seed: u64,
+        dir: &Path,
+    ) -> anyhow::Result<Transport> {
+        if a.pipeline {
+            let run_name = format!("discover-{}", std::process::id());
+            let (env, p) = crate::pipeline::spawn_sim_env(w, a.envs, &run_name, dir)?;
+            Ok(Transport {
+                env: Box::new(env),
+                pipeline: Some((p, run_name)),
+                name: "pipeline",
+            })
+        } else {
+            Ok(Transport {
+                env: Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, seed, 1)?),
+                pipeline: None,
+                name: "in-process",
+            })
+        }
     }
 
-    let (summary_transport, run_name) = if a.pipeline {
-        ("pipeline", format!("discover-{}", std::process::id()))
-    } else {
-        ("in-process", String::new())
-    };
-    let mut pipeline = None;
-    let mut env: Box<dyn BatchEnvironment> = if a.pipeline {
-        let (env, p) = crate::pipeline::spawn_sim_env(&w, a.envs, &run_name, &dir)?;
-        pipeline = Some(p);
-        Box::new(env)
-    } else {
-        Box::new(InProcess::new(layout.clone(), env_cfg, a.envs, seed, 1)?)
-    };
+    fn close(self) -> anyhow::Result<()> {
+        drop(self.env);
+        if let Some((mut p, run_name)) = self.pipeline {
+            p.stop_all(Duration::from_secs(3));
+            teardown(&run_name)?;
+        }
+        Ok(())
+    }
+}
 
-    let total = disc.config().max_rounds as u64;
+/// The loop's remaining rounds, with a progress bar (a line per round on a
+/// non-terminal stderr: a log file, CI).
+fn discover_rounds(run: &mut DiscoveryRun, env: &mut dyn BatchEnvironment) -> anyhow::Result<()> {
+    let total = run.discovery().config().max_rounds as u64;
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -235,92 +319,57 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    bar.set_position(disc.rounds_done() as u64);
-    while !disc.finished() {
-        let s = disc.round(env.as_mut())?;
-        disc.save(&ckpt)?;
-        bar.set_position(disc.rounds_done() as u64);
+    bar.set_position(run.discovery().rounds_done() as u64);
+    while !run.finished() {
+        let s = run.round(env)?;
+        let done = run.discovery().rounds_done();
+        bar.set_position(done as u64);
         let line = format!(
             "acc {:.3}  π_g {:.2}  |V_p| {}  cells {}",
             s.reconstruction_accuracy, s.gcp_success, s.pivotal_states, s.cells_visited
         );
-        // No bar on a non-terminal stderr (a log file, CI): a line per round.
         if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-            eprintln!("discover: round {}/{total}  {line}", disc.rounds_done());
+            eprintln!("discover: round {done}/{total}  {line}");
         }
         bar.set_message(line);
     }
     bar.finish_and_clear();
-    let gcp_success = disc.evaluate_gcp(env.as_mut(), 10, 200)?;
-    drop(env);
-    if let Some(mut p) = pipeline {
-        p.stop_all(Duration::from_secs(3));
-        teardown(&run_name)?;
-    }
+    Ok(())
+}
 
-    // The world graph over V_p: built here, or by the planner process.
-    let pivotal_file = dir.join("pivotal.json");
-    let cells: Vec<[u16; 2]> = disc
-        .pivotal_states()
-        .iter()
-        .map(|&c| {
-            [
-                (c as usize % layout.width) as u16,
-                (c as usize / layout.width) as u16,
-            ]
-        })
-        .collect();
-    sim::atomic_file::write_atomic(&pivotal_file, &serde_json::to_vec(&cells)?)?;
-    // Edges from random walks (built here, or by the planner process), then
-    // each path shortened by π_g where it reaches the next node faster.
-    let (graph, refinement) = if a.pipeline {
-        let mut g = build_graph_in_planner(&a, &w, &dir, &pivotal_file)?;
-        let stats = disc.refine_graph(&mut g)?;
-        (g, stats)
-    } else {
-        disc.build_graph(Task::MultiGoal)?
-    };
-    graph.save(&dir.join("graph.json"))?;
-    // What stage 2 (`worldgraph train --world-graph`) takes besides the
-    // graph: π_g's settings and weights.
-    sim::atomic_file::write_atomic(
-        &dir.join("pi_g.json"),
-        &serde_json::to_vec_pretty(disc.gcp().config())?,
-    )?;
-    disc.gcp().save(dir.join("pi_g.ot"))?;
-
-    let history = disc.history().to_vec();
+/// The run's summary (`discovery.json`): the loop's figures, the world
+/// graph's, and `V_p` against random cells on the maze's structure.
+fn summarise(
+    run: &mut DiscoveryRun,
+    graph: &planner::WorldGraph,
+    refinement: &RefinementStats,
+    gcp_success: f64,
+    transport: &str,
+    pivotal_cells: Vec<[u16; 2]>,
+) -> anyhow::Result<DiscoverySummary> {
+    let layout = run.layout().clone();
+    let disc = run.discovery();
+    let seed = disc.config().seed;
+    let history = disc.history();
     let env_steps: u64 = history.iter().map(|h| h.env_steps).sum();
     let loop_seconds: f64 = history.iter().map(|h| h.seconds).sum();
+    let reconstruction_accuracy = history.last().map_or(0.0, |h| h.reconstruction_accuracy);
     let pivotal = disc.pivotal_states();
     let structure = StructureReport::measure(
         &layout,
         pivotal,
-        &graph,
+        graph,
         &disc.graph_config(Task::MultiGoal),
         seed,
     )?;
-    let n = graph.num_nodes();
-    let connected = (0..n)
-        .flat_map(|i| (0..n).map(move |j| (i, j)))
-        .filter(|&(i, j)| {
-            i != j
-                && graph.distance(planner::NodeId(i as u16), planner::NodeId(j as u16))
-                    != planner::UNREACHABLE
-        })
-        .count();
-    let summary = DiscoverySummary {
+    Ok(DiscoverySummary {
         maze: layout.name.clone(),
         seed,
-        transport: summary_transport.into(),
+        transport: transport.into(),
         rounds: disc.rounds_done(),
         pivotal_states: pivotal.len(),
         edges: graph.edges().len(),
-        connected_pairs: if n > 1 {
-            connected as f64 / (n * (n - 1)) as f64
-        } else {
-            0.0
-        },
+        connected_pairs: connected_pairs(graph),
         passages: structure.passages,
         rooms: structure.rooms,
         passage_share: structure.pivotal.passage_share,
@@ -332,7 +381,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         route_stretch_random: structure.routing_random.mean_stretch,
         routed: structure.routing.routed,
         routed_random: structure.routing_random.routed,
-        reconstruction_accuracy: history.last().map_or(0.0, |h| h.reconstruction_accuracy),
+        reconstruction_accuracy,
         gcp_success_within_10: gcp_success,
         env_steps,
         wall_seconds: loop_seconds,
@@ -342,24 +391,49 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         edge_weight_walks: refinement.weight_walks,
         edge_weight_refined: refinement.weight_refined,
         edge_weight_shortest: refinement.weight_shortest,
-        pivotal_cells: cells,
-    };
-    sim::atomic_file::write_atomic(
-        &dir.join("discovery.json"),
-        &serde_json::to_vec_pretty(&summary)?,
-    )?;
-    pivotal_picture(&layout, &disc.prior_means(), pivotal, &graph, seed)
-        .save_png(&dir.join("pivotal.png"))?;
-    graph_picture(&graph, true).save_png(&dir.join("graph.png"))?;
-    curves(&history)
+        pivotal_cells,
+    })
+}
+
+/// Ordered node pairs with a path over all ordered pairs.
+fn connected_pairs(graph: &planner::WorldGraph) -> f64 {
+    let n = graph.num_nodes();
+    if n < 2 {
+        return 0.0;
+    }
+    let connected = (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .filter(|&(i, j)| {
+            i != j
+                && graph.distance(planner::NodeId(i as u16), planner::NodeId(j as u16))
+                    != planner::UNREACHABLE
+        })
+        .count();
+    connected as f64 / (n * (n - 1)) as f64
+}
+
+/// The pivotal states on the maze, the world graph, and the loop's curves.
+fn save_pictures(
+    run: &mut DiscoveryRun,
+    graph: &planner::WorldGraph,
+    seed: u64,
+) -> anyhow::Result<()> {
+    let dir = run.dir().to_path_buf();
+    let layout = run.layout().clone();
+    let disc = run.discovery();
+    pivotal_picture(
+        &layout,
+        &disc.prior_means(),
+        disc.pivotal_states(),
+        graph,
+        seed,
+    )
+    .save_png(&dir.join("pivotal.png"))?;
+    graph_picture(graph, true).save_png(&dir.join("graph.png"))?;
+    curves(disc.history())
         .render(900, 520)
         .save_png(&dir.join("discovery_curves.png"))?;
-    if a.json {
-        println!("{}", serde_json::to_string(&summary)?);
-    } else {
-        print_summary(&summary, &dir);
-    }
-    Ok(std::process::ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// Has a planner process build the world graph over `V_p` (`--node-file`)

@@ -8,6 +8,7 @@ pub mod bench_planner;
 pub mod clean;
 pub mod demo;
 pub mod discover;
+pub mod evaluate;
 pub mod experiment;
 pub mod run;
 pub mod sim;

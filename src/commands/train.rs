@@ -2,7 +2,8 @@
 //! one task, one maze, one seed — under the paper's protocol: periodic
 //! validation on 10 validation seeds keeps the best checkpoint, which is
 //! scored at the end on 100 held-out test seeds (section 5, Control
-//! Experiments). `worldgraph evaluate` scores a run on any seeds.
+//! Experiments). `worldgraph evaluate` ([`super::evaluate`]) scores a run on
+//! any seeds.
 //!
 //! Training runs in segments of `eval_every` env steps; after each, the
 //! agent is validated and the run checkpointed (weights, optimiser moments,
@@ -17,14 +18,11 @@ use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::hrl::{AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, IterationStats};
 use learner::run::artefact::{build_agent, check_world_graph_layout};
 use learner::run::config::{
-    MAX_EVAL_SEEDS, TrainConfig, auto_values, check_budget, config_with_overrides, read_config,
-    resolve_auto, trained_env_steps,
+    TrainConfig, auto_values, check_budget, config_with_overrides, resolve_auto, trained_env_steps,
 };
-use learner::run::dir::{RunKind, describe, kind_of, name_in};
-use learner::run::protocol::{
-    self, MAX_TRAIN_SEED, MetricsRow, Observer, RunState, TEST_STREAM, TestSummary, eval_env,
-};
-use learner::run::train_run::{LAYOUT_FILE, TrainRun, TrainSpec};
+use learner::run::dir::{RunKind, kind_of, name_in};
+use learner::run::protocol::{MAX_TRAIN_SEED, MetricsRow, Observer, RunState, TestSummary};
+use learner::run::train_run::{TrainRun, TrainSpec};
 use sim::{EnvConfig, Layout, Maze, Task};
 
 use crate::chart::{LineChart, Series, XScale};
@@ -198,7 +196,11 @@ fn pipeline_env(
 /// The layout and environments of a run: the embedded `maze` (its Door-Key
 /// variant for Door-Key) or the layout `file` (`--layout`), whose objects
 /// are the task's.
-fn train_world(maze: Maze, file: Option<&Path>, task: Task) -> anyhow::Result<(Layout, EnvConfig)> {
+pub(super) fn train_world(
+    maze: Maze,
+    file: Option<&Path>,
+    task: Task,
+) -> anyhow::Result<(Layout, EnvConfig)> {
     let Some(path) = file else {
         let layout = maze.layout(task.uses_door_key_layout());
         let cfg = EnvConfig::for_task(task, &layout);
@@ -644,214 +646,4 @@ fn print_summary(s: &TestSummary, test: &EvalResult, dir: &Path) {
             ""
         }
     );
-}
-
-/// `evaluate` options.
-#[derive(Debug, Clone, Args)]
-pub struct EvaluateArgs {
-    /// A `worldgraph train` run directory.
-    pub run: PathBuf,
-    /// Test seeds as `A..B` (B exclusive), environments `(test stream, A..B)`;
-    /// at most 10,000 at once.
-    #[arg(long, default_value = "0..100")]
-    pub seeds: String,
-    /// Episodes per seed (the seed fixes the maze's randomness; the policy's
-    /// sampling differs between episodes).
-    #[arg(long, default_value_t = 1)]
-    pub episodes_per_seed: usize,
-    /// Write a picture of the first episode here.
-    #[arg(long)]
-    pub picture: Option<PathBuf>,
-    /// Score the agent on another task of its maze with the same actions
-    /// (multigoal, multigoal-sparse, multigoal-stochastic), e.g. how a policy
-    /// trained on dense rewards scores under the sparse ones; the run's own
-    /// task by default. The agent is unchanged: only the environment's
-    /// rewards (and lava) are the other task's.
-    #[arg(long)]
-    pub task: Option<Task>,
-    /// Print JSON.
-    #[arg(long)]
-    pub json: bool,
-}
-
-/// Runs `worldgraph evaluate`.
-pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
-    let (first, end) = a
-        .seeds
-        .split_once("..")
-        .and_then(|(x, y)| Some((x.trim().parse::<u64>().ok()?, y.trim().parse::<u64>().ok()?)))
-        .with_context(|| format!("--seeds {:?} is not A..B", a.seeds))?;
-    anyhow::ensure!(end > first, "--seeds {:?} is empty", a.seeds);
-    anyhow::ensure!(
-        end - first <= MAX_EVAL_SEEDS,
-        "--seeds {:?} asks for {} seeds: at most {MAX_EVAL_SEEDS} at once (score the range \
-         in parts)",
-        a.seeds,
-        end - first
-    );
-    anyhow::ensure!(
-        a.episodes_per_seed > 0,
-        "--episodes-per-seed must be at least 1"
-    );
-    if let Some(path) = &a.picture {
-        crate::picture_path::prepare("--picture", path)?;
-    }
-    if let Some(kind @ RunKind::Discover) = kind_of(&a.run) {
-        bail!(
-            "{} is {}, not a train run: evaluate scores a train run's best checkpoint (give \
-             this one to `train --world-graph`)",
-            a.run.display(),
-            describe(&a.run, kind)
-        );
-    }
-    let state = protocol::read_state(&a.run)?.with_context(|| {
-        format!(
-            "{} is not a train run (no checkpoint/state.json)",
-            a.run.display()
-        )
-    })?;
-    let id = &state.identity;
-    let task = a.task.unwrap_or(id.task);
-    anyhow::ensure!(
-        task == id.task || (task.is_multigoal() && id.task.is_multigoal()),
-        "--task {}: {} was trained on {}, whose actions and layout differ; a run is scored \
-         on another task only among multigoal, multigoal-sparse and multigoal-stochastic",
-        task.name(),
-        a.run.display(),
-        id.task.name()
-    );
-    // The budget is in the run's config.toml (the identity holds 0).
-    let budget = read_config(&a.run.join("config.toml"))
-        .ok()
-        .map(|c| trained_env_steps(&c));
-    let unfinished = budget.filter(|&b| state.env_steps < b);
-    if let Some(b) = unfinished {
-        eprintln!(
-            "evaluate: {} is unfinished ({} of {b} env steps trained): scoring its best \
-             checkpoint so far",
-            a.run.display(),
-            state.env_steps
-        );
-    }
-    // A `--layout` run keeps its layout; an embedded maze's run records
-    // its name (`<maze>-doorkey` for Door-Key).
-    let own_layout = a.run.join(LAYOUT_FILE);
-    let (layout, env_cfg) = if own_layout.is_file() {
-        train_world(Maze::Small, Some(&own_layout), task)?
-    } else {
-        let maze: Maze = id
-            .maze
-            .strip_suffix("-doorkey")
-            .unwrap_or(&id.maze)
-            .parse()
-            .map_err(|e: String| anyhow::anyhow!(e))?;
-        train_world(maze, None, task)?
-    };
-    let mut agent = build_agent(
-        &id.config.agent,
-        &layout,
-        id.task,
-        id.world_graph.as_deref().map(Path::new),
-        id.seed,
-    )?;
-    protocol::load_best(&a.run, &mut agent)?;
-    let mut env = eval_env(&layout, env_cfg, TEST_STREAM, first, (end - first) as usize)?;
-    let mut scores = Vec::new();
-    let mut episodes = EpisodeFigures::default();
-    let mut trace = EpisodeTrace::default();
-    for k in 0..a.episodes_per_seed {
-        let t = (k == 0).then_some(&mut trace);
-        let r = if k == 0 {
-            agent.evaluate(&mut env, u64::MAX, t)?
-        } else {
-            agent.evaluate(&mut env, k as u64, None)?
-        };
-        scores.push(r.score);
-        episodes.add(&r);
-    }
-    let score = scores.iter().sum::<f64>() / scores.len() as f64;
-    let episodes = episodes.means();
-    if let Some(p) = &a.picture {
-        episode_picture(
-            &layout,
-            &trace,
-            agent.graph(),
-            &id.config.agent,
-            task,
-            first,
-        )
-        .save_png(p)?;
-    }
-    if a.json {
-        println!(
-            "{}",
-            serde_json::json!({"score": score, "task": task.name(), "trained_on": id.task.name(), "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": unfinished.is_none(), "env_steps": state.env_steps, "episodes": episodes})
-        );
-    } else {
-        println!(
-            "{}: score {:.3} on test seeds {} ({} episode(s) per seed){}{}",
-            a.run.display(),
-            score,
-            a.seeds,
-            a.episodes_per_seed,
-            if task == id.task {
-                String::new()
-            } else {
-                format!(" of {} (trained on {})", task.name(), id.task.name())
-            },
-            match unfinished {
-                Some(b) => format!(" (unfinished run: {} of {b} env steps)", state.env_steps),
-                None => String::new(),
-            }
-        );
-        println!(
-            "episodes: return {:.3}, exit reached {:.1} %, length {:.1} steps{}",
-            episodes.mean_return,
-            100.0 * episodes.exit_share,
-            episodes.mean_length,
-            if task.is_multigoal() {
-                format!(", balls collected {:.2}", episodes.mean_balls)
-            } else {
-                String::new()
-            }
-        );
-    }
-    let _ = BatchEnvironment::num_envs(&env);
-    Ok(std::process::ExitCode::SUCCESS)
-}
-
-/// What `evaluate`'s episodes did, over every round: the mean return, the
-/// share that reached the exit, the mean length and the mean number of
-/// balls collected (so a MultiGoal-Sparse score can be read as balls
-/// against steps).
-#[derive(Debug, Default, Clone, Copy, serde::Serialize)]
-struct EpisodeFigures {
-    episodes: usize,
-    mean_return: f64,
-    exit_share: f64,
-    mean_length: f64,
-    mean_balls: f64,
-}
-
-impl EpisodeFigures {
-    /// Adds one round's episodes (sums until [`Self::means`]).
-    fn add(&mut self, r: &learner::hrl::reports::EvalResult) {
-        self.episodes += r.returns.len();
-        self.mean_return += r.returns.iter().map(|&x| f64::from(x)).sum::<f64>();
-        self.exit_share += r.success_rate * r.returns.len() as f64;
-        self.mean_length += r.lengths.iter().map(|&x| f64::from(x)).sum::<f64>();
-        self.mean_balls += r.balls.iter().map(|&x| f64::from(x)).sum::<f64>();
-    }
-
-    /// The sums as means over the episodes.
-    fn means(self) -> EpisodeFigures {
-        let n = self.episodes.max(1) as f64;
-        EpisodeFigures {
-            episodes: self.episodes,
-            mean_return: self.mean_return / n,
-            exit_share: self.exit_share / n,
-            mean_length: self.mean_length / n,
-            mean_balls: self.mean_balls / n,
-        }
-    }
 }

@@ -15,9 +15,12 @@
 //!   checkpoints, the best checkpoint and the test summary.
 //! - [`train_run`]: a training run as a value: opened (new or resumed),
 //!   trained, tested.
+//! - [`discovery_run`]: a discovery run as a value: opened (new, resumed
+//!   or continued), run round by round, its world graph written.
 
 pub mod artefact;
 pub mod config;
 pub mod dir;
+pub mod discovery_run;
 pub mod protocol;
 pub mod train_run;
