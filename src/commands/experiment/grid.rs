@@ -143,6 +143,8 @@ impl Grid {
         Ok(g)
     }
 
+    /// Refuses, with the reason, a grid that could not run to its end: a
+    /// bad name, seeds, settings, discovery config, maze budget or group.
     fn check(&self) -> anyhow::Result<()> {
         anyhow::ensure!(
             !self.name.is_empty()
@@ -153,48 +155,11 @@ impl Grid {
             "name {:?} must be letters, digits, '-' or '_'",
             self.name
         );
-        anyhow::ensure!(!self.seeds.is_empty(), "seeds: at least one training seed");
-        for (i, &s) in self.seeds.iter().enumerate() {
-            anyhow::ensure!(
-                s < MAX_TRAIN_SEED,
-                "seeds: {s} is not below {}",
-                MAX_TRAIN_SEED
-            );
-            // Two runs of one seed would share a run directory and a summary.
-            anyhow::ensure!(
-                !self.seeds[..i].contains(&s),
-                "seeds: {s} is listed twice (each training seed once)"
-            );
-        }
-        anyhow::ensure!(
-            self.validation_seeds > 0 && self.test_seeds > 0,
-            "validation_seeds and test_seeds must be at least 1"
-        );
-        let max = MAX_EVAL_SEEDS;
-        for (name, n) in [
-            ("validation_seeds", self.validation_seeds),
-            ("test_seeds", self.test_seeds),
-        ] {
-            anyhow::ensure!(n as u64 <= max, "{name} = {n}: at most {max} seeds");
-        }
+        self.check_seeds()?;
         anyhow::ensure!(!self.maze.is_empty(), "[[maze]]: at least one maze");
         let cfg = self.try_train_config(self.maze[0].name).context("set")?;
         cfg.agent.validate().context("set")?;
-        if let Some(c) = &self.discover_config {
-            anyhow::ensure!(
-                c.is_file(),
-                "discover_config: {} is not a file (paths are relative to the directory the command runs in)",
-                c.display()
-            );
-            // The discoveries would refuse it one by one: refused here,
-            // `--dry-run` included.
-            learner::run::artefact::read_discovery_config(c)
-                .and_then(|cfg| {
-                    cfg.validate()
-                        .with_context(|| format!("{} is not a valid discovery config", c.display()))
-                })
-                .context("discover_config")?;
-        }
+        self.check_discover_config()?;
         for (i, m) in self.maze.iter().enumerate() {
             anyhow::ensure!(
                 m.env_steps > 0 && m.eval_every > 0 && m.discover_rounds > 0,
@@ -227,6 +192,55 @@ impl Grid {
                     m.name()
                 );
             }
+        }
+        Ok(())
+    }
+
+    /// The training seeds (each once, below the validation and test
+    /// streams) and the validation and test seed counts.
+    fn check_seeds(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(!self.seeds.is_empty(), "seeds: at least one training seed");
+        for (i, &s) in self.seeds.iter().enumerate() {
+            anyhow::ensure!(
+                s < MAX_TRAIN_SEED,
+                "seeds: {s} is not below {}",
+                MAX_TRAIN_SEED
+            );
+            // Two runs of one seed would share a run directory and a summary.
+            anyhow::ensure!(
+                !self.seeds[..i].contains(&s),
+                "seeds: {s} is listed twice (each training seed once)"
+            );
+        }
+        anyhow::ensure!(
+            self.validation_seeds > 0 && self.test_seeds > 0,
+            "validation_seeds and test_seeds must be at least 1"
+        );
+        let max = MAX_EVAL_SEEDS;
+        for (name, n) in [
+            ("validation_seeds", self.validation_seeds),
+            ("test_seeds", self.test_seeds),
+        ] {
+            anyhow::ensure!(n as u64 <= max, "{name} = {n}: at most {max} seeds");
+        }
+        Ok(())
+    }
+
+    /// `discover_config`, when given: a file of valid discovery settings
+    /// (refused here, `--dry-run` included, rather than by each discovery).
+    fn check_discover_config(&self) -> anyhow::Result<()> {
+        if let Some(c) = &self.discover_config {
+            anyhow::ensure!(
+                c.is_file(),
+                "discover_config: {} is not a file (paths are relative to the directory the command runs in)",
+                c.display()
+            );
+            learner::run::artefact::read_discovery_config(c)
+                .and_then(|cfg| {
+                    cfg.validate()
+                        .with_context(|| format!("{} is not a valid discovery config", c.display()))
+                })
+                .context("discover_config")?;
         }
         Ok(())
     }
