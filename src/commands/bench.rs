@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, Subcommand};
 use rayon::prelude::*;
 use serde::Serialize;
-use sim::{BatchEnv, EnvMeta};
+use sim::{BatchEnv, EnvMeta, StepBuffers};
 
 use crate::world_args::WorldArgs;
 
@@ -133,36 +133,109 @@ pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
     // Offsets into the table change every step, so consecutive steps differ.
     let table = action_table(n + 4099, cfg.task.num_actions(), a.world.seed);
     let window = Duration::from_secs_f64(a.seconds / WINDOWS as f64);
+    let obs_bytes_per_step = batch.cells_per_env() + std::mem::size_of::<EnvMeta>();
+    let mut memcpy = Memcpy::new(n, obs_bytes_per_step, a.threads)?;
 
-    // Baseline: copy the same bytes per step (cells and metas) with the same
-    // threads (on one thread, in the calling thread, as the batch steps).
-    let cpe = batch.cells_per_env();
-    let obs_bytes_per_step = cpe + std::mem::size_of::<EnvMeta>();
-    let src: Vec<u8> = (0..n * obs_bytes_per_step).map(|i| i as u8).collect();
-    let mut dst = vec![0u8; n * obs_bytes_per_step];
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads)
-        .build()?;
-    let chunk = n.div_ceil(a.threads * 4).max(16) * obs_bytes_per_step;
-    let copy = |dst: &mut [u8]| {
-        if a.threads == 1 {
-            dst.copy_from_slice(&src);
+    // Warm-up: page in buffers, start threads.
+    for s in 0..50 {
+        let o = (s * 7919) % 4099;
+        batch.step(&table[o..o + n], buf.out());
+        memcpy.copy();
+    }
+    let w = alternate_windows(&mut batch, &mut buf, &table, &mut memcpy, window);
+    let steps_per_sec = w.steps as f64 / w.sim_secs;
+    let memcpy_bytes_per_sec = (w.copied * (n * obs_bytes_per_step) as u64) as f64 / w.copy_secs;
+    let single_budget = Duration::from_secs_f64(a.seconds).min(Duration::from_secs(1));
+    let single = BatchEnv::new(layout, cfg, 1, a.world.seed, 1)?;
+    let single_env_steps_per_sec = single_env_rate(single, &table, single_budget);
+
+    Ok(SimBenchReport {
+        maze,
+        task: cfg.task.name().to_string(),
+        envs: n,
+        threads: a.threads,
+        steps_per_sec,
+        obs_bytes_per_step,
+        memcpy_bytes_per_sec,
+        ratio_to_memcpy_bound: w.ratios[WINDOWS / 2],
+        ratio_min: w.ratios[0],
+        ratio_max: w.ratios[WINDOWS - 1],
+        single_env_steps_per_sec,
+        episodes: w.episodes,
+    })
+}
+
+/// The baseline of `bench sim`: copying the bytes of one batch step's
+/// observations (cells and metas) with the simulator's threads (on one
+/// thread, in the calling thread, as the batch steps).
+struct Memcpy {
+    src: Vec<u8>,
+    dst: Vec<u8>,
+    pool: rayon::ThreadPool,
+    /// Bytes per parallel chunk: whole environments' observations.
+    chunk: usize,
+    threads: usize,
+}
+
+impl Memcpy {
+    /// The observations of `envs` environments, `obs_bytes_per_step`
+    /// each, copied on `threads` threads.
+    fn new(envs: usize, obs_bytes_per_step: usize, threads: usize) -> anyhow::Result<Memcpy> {
+        let bytes = envs * obs_bytes_per_step;
+        Ok(Memcpy {
+            src: (0..bytes).map(|i| i as u8).collect(),
+            dst: vec![0u8; bytes],
+            pool: rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()?,
+            chunk: envs.div_ceil(threads * 4).max(16) * obs_bytes_per_step,
+            threads,
+        })
+    }
+
+    /// One copy of all the bytes.
+    fn copy(&mut self) {
+        let (src, dst, chunk) = (&self.src, &mut self.dst, self.chunk);
+        if self.threads == 1 {
+            dst.copy_from_slice(src);
         } else {
-            pool.install(|| {
+            self.pool.install(|| {
                 dst.par_chunks_mut(chunk)
                     .zip(src.par_chunks(chunk))
                     .for_each(|(d, s)| d.copy_from_slice(s));
             });
         }
         std::hint::black_box(&dst);
-    };
-
-    // Warm-up: page in buffers, start threads.
-    for s in 0..50 {
-        let o = (s * 7919) % 4099;
-        batch.step(&table[o..o + n], buf.out());
-        copy(&mut dst);
     }
+}
+
+/// What the alternating windows of `bench sim` measured.
+struct Windows {
+    /// Env-steps in the simulator windows.
+    steps: u64,
+    /// Episodes finished in them.
+    episodes: u64,
+    /// Seconds of the simulator windows.
+    sim_secs: f64,
+    /// Seconds of the memcpy windows.
+    copy_secs: f64,
+    /// Copies of the batch's bytes made in them.
+    copied: u64,
+    /// Each window pair's ratio of simulator env-steps/s to the memcpy
+    /// bound's, sorted.
+    ratios: Vec<f64>,
+}
+
+/// [`WINDOWS`] simulator windows of `window` each, every one followed by a
+/// memcpy window as long.
+fn alternate_windows(
+    batch: &mut BatchEnv,
+    buf: &mut StepBuffers,
+    table: &[u8],
+    memcpy: &mut Memcpy,
+    window: Duration,
+) -> Windows {
+    let n = buf.meta.len();
     let (mut steps, mut episodes) = (0u64, 0u64);
     let (mut sim_secs, mut copy_secs, mut copied) = (0.0, 0.0, 0u64);
     let mut ratios = Vec::with_capacity(WINDOWS);
@@ -180,7 +253,7 @@ pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
         let (c0, t0) = (copied, Instant::now());
         while t0.elapsed() < window {
             for _ in 0..16 {
-                copy(&mut dst);
+                memcpy.copy();
                 copied += 1;
             }
         }
@@ -191,39 +264,31 @@ pub fn bench_sim(a: &BenchSimArgs) -> anyhow::Result<SimBenchReport> {
         sim_secs += sim_dt;
         copy_secs += copy_dt;
     }
-    let steps_per_sec = steps as f64 / sim_secs;
-    let memcpy_bytes_per_sec = (copied * (n * obs_bytes_per_step) as u64) as f64 / copy_secs;
     ratios.sort_by(f64::total_cmp);
+    Windows {
+        steps,
+        episodes,
+        sim_secs,
+        copy_secs,
+        copied,
+        ratios,
+    }
+}
 
-    // One environment on one thread.
-    let mut single = BatchEnv::new(layout, cfg, 1, a.world.seed, 1)?;
+/// Steps per second of `single` (one environment on one thread, its
+/// observation written) over `budget`.
+fn single_env_rate(mut single: BatchEnv, table: &[u8], budget: Duration) -> f64 {
     let mut sbuf = single.buffers();
     single.reset(sbuf.out());
     let mut s_steps = 0u64;
     let t0 = Instant::now();
-    let single_budget = Duration::from_secs_f64(a.seconds).min(Duration::from_secs(1));
-    while t0.elapsed() < single_budget {
+    while t0.elapsed() < budget {
         for k in 0..1024 {
             single.step(&table[k..k + 1], sbuf.out());
         }
         s_steps += 1024;
     }
-    let single_env_steps_per_sec = s_steps as f64 / t0.elapsed().as_secs_f64();
-
-    Ok(SimBenchReport {
-        maze,
-        task: cfg.task.name().to_string(),
-        envs: n,
-        threads: a.threads,
-        steps_per_sec,
-        obs_bytes_per_step,
-        memcpy_bytes_per_sec,
-        ratio_to_memcpy_bound: ratios[WINDOWS / 2],
-        ratio_min: ratios[0],
-        ratio_max: ratios[WINDOWS - 1],
-        single_env_steps_per_sec,
-        episodes,
-    })
+    s_steps as f64 / t0.elapsed().as_secs_f64()
 }
 
 /// Prints the `bench sim` summary table.
