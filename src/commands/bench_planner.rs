@@ -106,6 +106,35 @@ fn dijkstra(
 
 /// Runs the benchmark.
 pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
+    let (mut graph, build_seconds) = build_graph(&a)?;
+    let rebuild_ms = median_rebuild_ms(&mut graph);
+    let pairs = query_pairs(&graph, &a);
+    anyhow::ensure!(!pairs.is_empty(), "no connected node pairs in this graph");
+    let lat = time_queries(&graph, &pairs);
+    let r = PlannerBenchReport {
+        nodes: graph.num_nodes(),
+        edges: graph.edges().len(),
+        build_seconds,
+        rebuild_ms,
+        route_p50_us: lat.percentile_us("dp_route", 50.0),
+        route_p99_us: lat.percentile_us("dp_route", 99.0),
+        route_p999_us: lat.percentile_us("dp_route", 99.9),
+        dijkstra_p50_us: lat.percentile_us("dijkstra_baseline", 50.0),
+        dijkstra_p99_us: lat.percentile_us("dijkstra_baseline", 99.0),
+        speedup_p50: lat.percentile_us("dijkstra_baseline", 50.0)
+            / lat.percentile_us("dp_route", 50.0),
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&r)?);
+    } else {
+        print_table(&a, &r, &lat);
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// The world graph of `--nodes` random nodes on `--maze`, and the seconds
+/// its build took (walks, shortening and the all-pairs tables).
+fn build_graph(a: &BenchPlannerArgs) -> anyhow::Result<(WorldGraph, f64)> {
     let layout = a.maze.layout(false);
     let free = layout.free_cells().len();
     anyhow::ensure!(
@@ -123,8 +152,12 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
         ..PlannerConfig::default()
     };
     let t0 = Instant::now();
-    let mut graph = WorldGraph::build(&layout, &cfg, &[])?;
-    let build_seconds = t0.elapsed().as_secs_f64();
+    let graph = WorldGraph::build(&layout, &cfg, &[])?;
+    Ok((graph, t0.elapsed().as_secs_f64()))
+}
+
+/// Median of 5 rebuilds of the all-pairs shortest paths (ms).
+fn median_rebuild_ms(graph: &mut WorldGraph) -> f64 {
     let mut rebuilds = Vec::new();
     for _ in 0..5 {
         let t = Instant::now();
@@ -132,18 +165,25 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
         rebuilds.push(t.elapsed().as_secs_f64() * 1e3);
     }
     rebuilds.sort_by(f64::total_cmp);
+    rebuilds[rebuilds.len() / 2]
+}
 
+/// `--queries` random pairs of distinct nodes with a path between them
+/// (at most a million).
+fn query_pairs(graph: &WorldGraph, a: &BenchPlannerArgs) -> Vec<(usize, usize)> {
     let n = graph.num_nodes();
     let mut rng = SmallRng::seed_from_u64(a.seed ^ 0xbe4c);
-    let pairs: Vec<(usize, usize)> =
-        std::iter::repeat_with(|| (rng.random_range(0..n), rng.random_range(0..n)))
-            .filter(|&(x, y)| {
-                x != y && graph.distance(NodeId(x as u16), NodeId(y as u16)) != UNREACHABLE
-            })
-            .take(a.queries.min(1_000_000))
-            .collect();
-    anyhow::ensure!(!pairs.is_empty(), "no connected node pairs in this graph");
+    std::iter::repeat_with(|| (rng.random_range(0..n), rng.random_range(0..n)))
+        .filter(|&(x, y)| {
+            x != y && graph.distance(NodeId(x as u16), NodeId(y as u16)) != UNREACHABLE
+        })
+        .take(a.queries.min(1_000_000))
+        .collect()
+}
 
+/// Times every pair's DP route (`dp_route`), then every pair's Dijkstra
+/// node path on the graph's edge list (`dijkstra_baseline`).
+fn time_queries(graph: &WorldGraph, pairs: &[(usize, usize)]) -> Latencies {
     let mut lat = Latencies::new("planner");
     let mut route = Route::with_capacity(shm_schemas::MAX_ROUTE_LEN, shm_schemas::MAX_ROUTE_PIVOTS);
     for (i, &(x, y)) in pairs.iter().enumerate() {
@@ -157,46 +197,34 @@ pub fn run(a: BenchPlannerArgs) -> anyhow::Result<std::process::ExitCode> {
         lat.record("dp_route", t.elapsed().as_nanos() as u64);
         std::hint::black_box(r.ok());
     }
+    let n = graph.num_nodes();
     let mut adj = vec![Vec::new(); n];
     for e in graph.edges() {
         adj[e.from.index()].push((e.to.0, e.weight()));
     }
     let (mut dist, mut prev, mut path) = (vec![0u32; n], vec![0u16; n], Vec::with_capacity(n));
-    for &(x, y) in &pairs {
+    for &(x, y) in pairs {
         let t = Instant::now();
         let ok = dijkstra(&adj, x, y, &mut dist, &mut prev, &mut path);
         lat.record("dijkstra_baseline", t.elapsed().as_nanos() as u64);
         std::hint::black_box(ok);
     }
-    let r = PlannerBenchReport {
-        nodes: n,
-        edges: graph.edges().len(),
-        build_seconds,
-        rebuild_ms: rebuilds[rebuilds.len() / 2],
-        route_p50_us: lat.percentile_us("dp_route", 50.0),
-        route_p99_us: lat.percentile_us("dp_route", 99.0),
-        route_p999_us: lat.percentile_us("dp_route", 99.9),
-        dijkstra_p50_us: lat.percentile_us("dijkstra_baseline", 50.0),
-        dijkstra_p99_us: lat.percentile_us("dijkstra_baseline", 99.0),
-        speedup_p50: lat.percentile_us("dijkstra_baseline", 50.0)
-            / lat.percentile_us("dp_route", 50.0),
-    };
-    if a.json {
-        println!("{}", serde_json::to_string(&r)?);
-    } else {
-        println!(
-            "bench planner: {} maze, {} nodes, {} edges, graph built in {:.2} s",
-            a.maze, r.nodes, r.edges, r.build_seconds
-        );
-        println!(
-            "  all-pairs shortest paths rebuild (Floyd-Warshall): {:.2} ms (median of 5)",
-            r.rebuild_ms
-        );
-        print!("{}", lat.table());
-        println!(
-            "  DP route (nodes+cells+actions) vs Dijkstra node path, p50 speed-up: {:.1}x",
-            r.speedup_p50
-        );
-    }
-    Ok(std::process::ExitCode::SUCCESS)
+    lat
+}
+
+/// Prints the `bench planner` table.
+fn print_table(a: &BenchPlannerArgs, r: &PlannerBenchReport, lat: &Latencies) {
+    println!(
+        "bench planner: {} maze, {} nodes, {} edges, graph built in {:.2} s",
+        a.maze, r.nodes, r.edges, r.build_seconds
+    );
+    println!(
+        "  all-pairs shortest paths rebuild (Floyd-Warshall): {:.2} ms (median of 5)",
+        r.rebuild_ms
+    );
+    print!("{}", lat.table());
+    println!(
+        "  DP route (nodes+cells+actions) vs Dijkstra node path, p50 speed-up: {:.1}x",
+        r.speedup_p50
+    );
 }
