@@ -37,7 +37,7 @@ use shm_schemas::EnvMeta;
 use sim::{BatchEnv, StepOut};
 
 use crate::latency::Latencies;
-use crate::pipeline::RunCmdArgs;
+use crate::pipeline::{Pipeline, RunCmdArgs};
 use crate::roles::learner::PolicyKind;
 use crate::roles::planner::GraphArgs;
 use crate::roles::{OnPeerDeath, RunArgs};
@@ -162,59 +162,64 @@ pub fn run(a: BenchPipelineArgs) -> anyhow::Result<std::process::ExitCode> {
     if a.json {
         println!("{}", serde_json::to_string(&r)?);
     } else {
-        println!(
-            "bench pipeline: {} maze, {} envs ({} slice(s) over shared memory), {} sim thread(s), null policy",
-            r.maze, r.envs, a.slices, a.threads
-        );
-        println!("  {:<36} {:>14} {:>10}", "setup", "env-steps/s", "ratio");
-        println!(
-            "  {:<36} {:>13.2}M {:>10}",
-            "in-process (no IPC)",
-            r.inprocess_steps_per_sec / 1e6,
-            "1.00"
-        );
-        println!(
-            "  {:<36} {:>13.2}M {:>10.2}",
-            "3 processes, iceoryx2 shared memory",
-            r.ipc_steps_per_sec / 1e6,
-            r.ipc_to_inprocess
-        );
-        println!(
-            "  {:<36} {:>13.2}M {:>10.2}",
-            "3 processes, Unix sockets (copying)",
-            r.socket_steps_per_sec / 1e6,
-            socket / inprocess
-        );
-        println!("  {:<36} {:>14.2}", "ipc / socket", r.ipc_to_socket);
-        println!("  round trip (us)            p50        p99      p99.9");
-        println!(
-            "  shared memory       {:>10.2} {:>10.2} {:>10.2}",
-            r.roundtrip_p50_us, r.roundtrip_p99_us, r.roundtrip_p999_us
-        );
-        println!(
-            "  unix socket         {:>10.2} {:>10.2}",
-            r.socket_roundtrip_p50_us, r.socket_roundtrip_p99_us
-        );
-        println!("  batches lost over shared memory: {}", r.ipc_batches_lost);
-        println!(
-            "  pipeline sim waiting for actions: {:.1} % of its loop (near 0: the sim is the bottleneck)",
-            100.0 * r.sim_wait_fraction
-        );
-        println!("  rounds (in-process, shared memory, ratio, core-to-core round trip):");
-        for (i, round) in r.rounds.iter().enumerate() {
-            println!(
-                "    {}  {:>7.2}M {:>7.2}M {:>6.2}  {}",
-                i + 1,
-                round.inprocess_steps_per_sec / 1e6,
-                round.ipc_steps_per_sec / 1e6,
-                round.ratio,
-                round
-                    .core_to_core_rtt_ns
-                    .map_or("-".to_string(), |ns| format!("{ns:.0} ns"))
-            );
-        }
+        print_table(&r, &a);
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// Prints the `bench pipeline` table.
+fn print_table(r: &PipelineBenchReport, a: &BenchPipelineArgs) {
+    println!(
+        "bench pipeline: {} maze, {} envs ({} slice(s) over shared memory), {} sim thread(s), null policy",
+        r.maze, r.envs, a.slices, a.threads
+    );
+    println!("  {:<36} {:>14} {:>10}", "setup", "env-steps/s", "ratio");
+    println!(
+        "  {:<36} {:>13.2}M {:>10}",
+        "in-process (no IPC)",
+        r.inprocess_steps_per_sec / 1e6,
+        "1.00"
+    );
+    println!(
+        "  {:<36} {:>13.2}M {:>10.2}",
+        "3 processes, iceoryx2 shared memory",
+        r.ipc_steps_per_sec / 1e6,
+        r.ipc_to_inprocess
+    );
+    println!(
+        "  {:<36} {:>13.2}M {:>10.2}",
+        "3 processes, Unix sockets (copying)",
+        r.socket_steps_per_sec / 1e6,
+        r.socket_steps_per_sec / r.inprocess_steps_per_sec
+    );
+    println!("  {:<36} {:>14.2}", "ipc / socket", r.ipc_to_socket);
+    println!("  round trip (us)            p50        p99      p99.9");
+    println!(
+        "  shared memory       {:>10.2} {:>10.2} {:>10.2}",
+        r.roundtrip_p50_us, r.roundtrip_p99_us, r.roundtrip_p999_us
+    );
+    println!(
+        "  unix socket         {:>10.2} {:>10.2}",
+        r.socket_roundtrip_p50_us, r.socket_roundtrip_p99_us
+    );
+    println!("  batches lost over shared memory: {}", r.ipc_batches_lost);
+    println!(
+        "  pipeline sim waiting for actions: {:.1} % of its loop (near 0: the sim is the bottleneck)",
+        100.0 * r.sim_wait_fraction
+    );
+    println!("  rounds (in-process, shared memory, ratio, core-to-core round trip):");
+    for (i, round) in r.rounds.iter().enumerate() {
+        println!(
+            "    {}  {:>7.2}M {:>7.2}M {:>6.2}  {}",
+            i + 1,
+            round.inprocess_steps_per_sec / 1e6,
+            round.ipc_steps_per_sec / 1e6,
+            round.ratio,
+            round
+                .core_to_core_rtt_ns
+                .map_or("-".to_string(), |ns| format!("{ns:.0} ns"))
+        );
+    }
 }
 
 /// The in-process setup: the simulator and the null policy in one loop.
@@ -302,21 +307,35 @@ struct Interleaved {
     rounds: Vec<BenchRound>,
 }
 
+/// Rounds of the interleaved measurement.
+const ROUNDS: usize = 5;
+
 /// The in-process loop and the three processes over shared memory, measured
-/// in alternating windows (`ROUNDS` of each, the pipeline paused with
+/// in alternating windows ([`ROUNDS`] of each, the pipeline paused with
 /// SIGSTOP while the in-process loop runs), so that drift in the machine's
 /// speed (a shared VM's neighbours) hits both alike. Throughputs and their
 /// ratio are medians over the rounds; a pipeline window is timed by the
 /// sim's own progress lines (every 250 ms).
 fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
-    const ROUNDS: usize = 5;
     let window = Duration::from_secs_f64((a.seconds / ROUNDS as f64).max(0.5));
     let mut local = InProcessLoop::new(a)?;
     local.run_for(Duration::from_secs(1))?; // warm-up
 
     let dir = tempfile::tempdir()?;
     let run = format!("bench-{}", std::process::id());
-    let args = RunCmdArgs {
+    let mut p = pipeline_args(a, &run, dir.path()).pipeline()?;
+    p.start_all()?;
+    let measured = alternate_rounds(&p, dir.path(), &mut local, window);
+    p.signal_all(Signal::SIGCONT);
+    p.stop_all(Duration::from_secs(3));
+    teardown(&run)?;
+    summarise_rounds(dir.path(), measured?)
+}
+
+/// The pipeline `bench pipeline` measures: `run`'s three processes with the
+/// random policy, logging into `dir`, under the run name `run`.
+fn pipeline_args(a: &BenchPipelineArgs, run: &str, dir: &std::path::Path) -> RunCmdArgs {
+    RunCmdArgs {
         world: a.world.clone(),
         graph: GraphArgs {
             nodes: 32,
@@ -327,8 +346,8 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
             no_shorten: false,
         },
         run: RunArgs {
-            run: run.clone(),
-            run_dir: Some(dir.path().to_path_buf()),
+            run: run.to_string(),
+            run_dir: Some(dir.to_path_buf()),
             on_peer_death: OnPeerDeath::Exit,
             duration: None,
             cpu: None,
@@ -341,34 +360,59 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
         checkpoint_every: 10,
         logs_to_files: true,
         pin: false,
+    }
+}
+
+/// Env-steps/s of each round's two windows, and the core-to-core round
+/// trip measured before each.
+struct RoundRates {
+    local: Vec<f64>,
+    ipc: Vec<f64>,
+    c2c: Vec<Option<f64>>,
+}
+
+/// After the started pipeline `p` (logging into `dir`) has warmed up,
+/// [`ROUNDS`] rounds of: the pipeline stopped, the core-to-core round trip
+/// and a `window` of the in-process loop; the pipeline resumed, a `window`
+/// of it timed by its progress lines. Leaves the pipeline running.
+fn alternate_rounds(
+    p: &Pipeline,
+    dir: &std::path::Path,
+    local: &mut InProcessLoop,
+    window: Duration,
+) -> anyhow::Result<RoundRates> {
+    // Warm-up: the planner builds its graph, the learner connects.
+    let first = next_progress(dir, None)?;
+    std::thread::sleep(Duration::from_secs(1));
+    next_progress(dir, Some(first))?;
+    let mut rates = RoundRates {
+        local: Vec::new(),
+        ipc: Vec::new(),
+        c2c: Vec::new(),
     };
-    let mut p = args.pipeline()?;
-    p.start_all()?;
-    let mut c2c = Vec::new();
-    let measured = (|| -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
-        // Warm-up: the planner builds its graph, the learner connects.
-        let first = next_progress(dir.path(), None)?;
-        std::thread::sleep(Duration::from_secs(1));
-        next_progress(dir.path(), Some(first))?;
-        let (mut local_rates, mut ipc_rates) = (Vec::new(), Vec::new());
-        for _ in 0..ROUNDS {
-            p.signal_all(Signal::SIGSTOP);
-            c2c.push(core_to_core_round_trip_ns());
-            local_rates.push(local.run_for(window)?);
-            p.signal_all(Signal::SIGCONT);
-            std::thread::sleep(Duration::from_millis(200));
-            let start = next_progress(dir.path(), sim_progress(dir.path()))?;
-            std::thread::sleep(window);
-            let end = next_progress(dir.path(), sim_progress(dir.path()))?;
-            anyhow::ensure!(end.0 > start.0, "the pipeline's clock did not advance");
-            ipc_rates.push((end.1 - start.1) as f64 / (end.0 - start.0));
-        }
-        Ok((local_rates, ipc_rates))
-    })();
-    p.signal_all(Signal::SIGCONT);
-    p.stop_all(Duration::from_secs(3));
-    teardown(&run)?;
-    let (local_rates, ipc_rates) = measured?;
+    for _ in 0..ROUNDS {
+        p.signal_all(Signal::SIGSTOP);
+        rates.c2c.push(core_to_core_round_trip_ns());
+        rates.local.push(local.run_for(window)?);
+        p.signal_all(Signal::SIGCONT);
+        std::thread::sleep(Duration::from_millis(200));
+        let start = next_progress(dir, sim_progress(dir))?;
+        std::thread::sleep(window);
+        let end = next_progress(dir, sim_progress(dir))?;
+        anyhow::ensure!(end.0 > start.0, "the pipeline's clock did not advance");
+        rates.ipc.push((end.1 - start.1) as f64 / (end.0 - start.0));
+    }
+    Ok(rates)
+}
+
+/// The rounds' medians, and the round trips, losses and waiting the
+/// pipeline's sim and learner reported into `dir` when they stopped.
+fn summarise_rounds(dir: &std::path::Path, rates: RoundRates) -> anyhow::Result<Interleaved> {
+    let RoundRates {
+        local: local_rates,
+        ipc: ipc_rates,
+        c2c,
+    } = rates;
     let ratios: Vec<f64> = ipc_rates
         .iter()
         .zip(&local_rates)
@@ -376,10 +420,10 @@ fn bench_interleaved(a: &BenchPipelineArgs) -> anyhow::Result<Interleaved> {
         .collect();
 
     let sim: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("sim.report.json"))?)?;
+        serde_json::from_slice(&std::fs::read(dir.join("sim.report.json"))?)?;
     let pct = |k: &str| sim[k].as_f64().unwrap_or(f64::NAN);
     let learner: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("learner.report.json"))?)?;
+        serde_json::from_slice(&std::fs::read(dir.join("learner.report.json"))?)?;
     let rounds = (0..ratios.len())
         .map(|i| BenchRound {
             inprocess_steps_per_sec: local_rates[i],
@@ -478,39 +522,17 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// One frame on the socket: `seq`, then `N` metas and `N × H × W` cells.
+/// The socket setup: the sim steps the batch in this process and writes
+/// every observation batch into the sockets of a learner and a planner
+/// peer (`bench socket-peer`), the learner answering with actions.
+/// Env-steps/s, and the round trip's p50 and p99 (µs). One frame on the
+/// socket: `seq`, then `N` metas and `N × H × W` cells.
 fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
     let (layout, cfg) = a.world.build()?;
     let cpe = layout.width * layout.height;
     let frame = 8 + a.envs * (std::mem::size_of::<EnvMeta>() + cpe);
     let dir = tempfile::tempdir()?;
-    let mut peers = Vec::new();
-    let mut streams = Vec::new();
-    for role in ["learner", "planner"] {
-        let path: PathBuf = dir.path().join(format!("{role}.sock"));
-        let listener = UnixListener::bind(&path)?;
-        let child = crate::pipeline::worldgraph_command()?
-            .args([
-                "bench",
-                "socket-peer",
-                "--socket",
-                &path.display().to_string(),
-                "--role",
-                role,
-            ])
-            .args([
-                "--frame-bytes",
-                &frame.to_string(),
-                "--envs",
-                &a.envs.to_string(),
-            ])
-            .args(["--num-actions", &cfg.task.num_actions().to_string()])
-            .stdin(Stdio::null())
-            .spawn()?;
-        peers.push(child);
-        let (s, _) = listener.accept()?;
-        streams.push(s);
-    }
+    let (peers, streams) = spawn_socket_peers(a, dir.path(), frame, cfg.task.num_actions())?;
     let mut batch = BatchEnv::new(layout, cfg, a.envs, a.world.seed, a.threads)?;
     let mut buf = batch.buffers();
     batch.reset(buf.out());
@@ -559,6 +581,45 @@ fn bench_socket(a: &BenchPipelineArgs) -> anyhow::Result<(f64, (f64, f64))> {
             lat.percentile_us("round_trip", 99.0),
         ),
     ))
+}
+
+/// Starts the learner and the planner socket peers, each on its own socket
+/// in `dir` for frames of `frame` bytes: the children and, in the same
+/// order, the accepted streams.
+fn spawn_socket_peers(
+    a: &BenchPipelineArgs,
+    dir: &std::path::Path,
+    frame: usize,
+    num_actions: usize,
+) -> anyhow::Result<(Vec<std::process::Child>, Vec<UnixStream>)> {
+    let mut peers = Vec::new();
+    let mut streams = Vec::new();
+    for role in ["learner", "planner"] {
+        let path: PathBuf = dir.join(format!("{role}.sock"));
+        let listener = UnixListener::bind(&path)?;
+        let child = crate::pipeline::worldgraph_command()?
+            .args([
+                "bench",
+                "socket-peer",
+                "--socket",
+                &path.display().to_string(),
+                "--role",
+                role,
+            ])
+            .args([
+                "--frame-bytes",
+                &frame.to_string(),
+                "--envs",
+                &a.envs.to_string(),
+            ])
+            .args(["--num-actions", &num_actions.to_string()])
+            .stdin(Stdio::null())
+            .spawn()?;
+        peers.push(child);
+        let (s, _) = listener.accept()?;
+        streams.push(s);
+    }
+    Ok((peers, streams))
 }
 
 /// `bench socket-peer` (internal): the learner or planner end of the socket transport.
