@@ -9,7 +9,7 @@
 //! issue 26) on the same maze, batch, rollout and threads when a Python
 //! with `torch` is found: the fast path's env-steps/s as a ratio to it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -352,15 +352,75 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         l.iterate(env)?;
         l.take_times();
     }
+    let windows = alternate_windows(&mut learners, a.seconds, steps_per_iter)?;
+    let gflops = matmul_gflops(1.0);
+    let report = learner_report(&a, rollout, &paths, &learners, &windows, gflops)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&report);
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
 
+/// What the alternating windows measured, per path (in the order of
+/// [`measured_paths`]).
+struct PathWindows {
+    /// Env-steps/s of each window.
+    rates: Vec<Vec<f64>>,
+    /// Phase times summed over the windows.
+    times: Vec<PhaseTimes>,
+    /// Seconds of the windows, summed.
+    walls: Vec<f64>,
+    /// Env steps trained in the windows.
+    steps: Vec<u64>,
+    /// The Manager's decisions in the fast path's windows.
+    fast_decisions: u64,
+}
+
+impl PathWindows {
+    /// Path `i`'s figures, its model making `flops` FLOPs per env-step.
+    fn figures(&self, i: usize, flops: f64) -> PathFigures {
+        let rate = median(self.rates[i].clone());
+        PathFigures {
+            env_steps_per_sec: rate,
+            env_steps: self.steps[i],
+            phases: shares(&self.times[i], self.walls[i]),
+            flops_per_env_step: flops,
+            achieved_gflops: flops * rate / 1e9,
+        }
+    }
+
+    /// Path `i`'s env-steps/s over path `j`'s: the median of the ratios per
+    /// window (the paths of one window ran back to back).
+    fn ratio(&self, i: usize, j: usize) -> f64 {
+        median(
+            self.rates[i]
+                .iter()
+                .zip(&self.rates[j])
+                .map(|(a, b)| a / b.max(1e-9))
+                .collect(),
+        )
+    }
+}
+
+/// Trains every learner in turn for a window, in `WINDOWS` rounds, the
+/// windows splitting `seconds` evenly.
+fn alternate_windows(
+    learners: &mut [(Learner, InProcess)],
+    seconds: f64,
+    steps_per_iter: u64,
+) -> anyhow::Result<PathWindows> {
     const WINDOWS: usize = 3;
-    let k = paths.len();
-    let window = a.seconds / (k * WINDOWS) as f64;
-    let mut rates = vec![Vec::new(); k];
-    let mut times = vec![PhaseTimes::default(); k];
-    let mut walls = vec![0.0; k];
-    let mut steps = vec![0u64; k];
-    let mut fast_decisions = 0u64;
+    let k = learners.len();
+    let window = seconds / (k * WINDOWS) as f64;
+    let mut w = PathWindows {
+        rates: vec![Vec::new(); k],
+        times: vec![PhaseTimes::default(); k],
+        walls: vec![0.0; k],
+        steps: vec![0u64; k],
+        fast_decisions: 0,
+    };
     let bar = crate::progress::bar((k * WINDOWS) as u64, "bench learner windows");
     for _ in 0..WINDOWS {
         for (i, (l, env)) in learners.iter_mut().enumerate() {
@@ -372,61 +432,52 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
             }
             let wall = start.elapsed().as_secs_f64();
             if i == 0 {
-                fast_decisions += decisions;
+                w.fast_decisions += decisions;
             }
-            times[i].add(&l.take_times());
-            walls[i] += wall;
-            steps[i] += n;
-            rates[i].push(n as f64 / wall);
+            w.times[i].add(&l.take_times());
+            w.walls[i] += wall;
+            w.steps[i] += n;
+            w.rates[i].push(n as f64 / wall);
             bar.inc(1);
         }
     }
     bar.finish_and_clear();
-    let gflops = matmul_gflops(1.0);
-    let figures = |i: usize| {
-        let rate = median(rates[i].clone());
-        let flops = learners[i].0.flops();
-        PathFigures {
-            env_steps_per_sec: rate,
-            env_steps: steps[i],
-            phases: shares(&times[i], walls[i]),
-            flops_per_env_step: flops,
-            achieved_gflops: flops * rate / 1e9,
-        }
-    };
-    // Ratios per window (the paths of one window ran back to back).
-    let ratio = |i: usize, j: usize| {
-        median(
-            rates[i]
-                .iter()
-                .zip(&rates[j])
-                .map(|(a, b)| a / b.max(1e-9))
-                .collect(),
-        )
-    };
+    Ok(w)
+}
+
+/// The report of the windows `w` of `learners` (one per path of `paths`),
+/// against the matmul bound `gflops` and, after running it, the PyTorch
+/// reference.
+fn learner_report(
+    a: &BenchLearnerArgs,
+    rollout: usize,
+    paths: &[GradPath],
+    learners: &[(Learner, InProcess)],
+    w: &PathWindows,
+    gflops: f64,
+) -> anyhow::Result<LearnerBenchReport> {
+    let figures = |i: usize| w.figures(i, learners[i].0.flops());
     let index = |p: GradPath| paths.iter().position(|&q| q == p).expect("measured");
     let tch_i = index(GradPath::Tch);
-    let named: Vec<NamedPath> = (0..k)
+    let named: Vec<NamedPath> = (0..paths.len())
         .map(|i| NamedPath {
             path: paths[i].name().to_string(),
             fast: i == 0,
             figures: figures(i),
-            over_tch: ratio(i, tch_i),
+            over_tch: w.ratio(i, tch_i),
         })
         .collect();
     let fast_fig = figures(0);
-    let tch_fig = figures(tch_i);
-    let speedup = ratio(0, tch_i);
     let fast = &learners[0].0;
     let (layout, env_cfg) = a.world.build()?;
-    let decisions_per_step = fast_decisions as f64 / steps[0].max(1) as f64;
-    let horizon = (a.agent == BenchAgent::Wn && fast_decisions > 0)
+    let decisions_per_step = w.fast_decisions as f64 / w.steps[0].max(1) as f64;
+    let horizon = (a.agent == BenchAgent::Wn && w.fast_decisions > 0)
         .then(|| (1.0 / decisions_per_step).round().max(1.0) as usize);
-    let (pytorch, pytorch_note) = pytorch_reference(&a, rollout, fast.window_side(), horizon)?;
+    let (pytorch, pytorch_note) = pytorch_reference(a, rollout, fast.window_side(), horizon)?;
     let fast_over_pytorch = pytorch
         .as_ref()
         .map(|p| fast_fig.env_steps_per_sec / p.env_steps_per_sec.max(1e-9));
-    let report = LearnerBenchReport {
+    Ok(LearnerBenchReport {
         agent: a.agent,
         maze: layout.name.clone(),
         task: env_cfg.task.name().to_string(),
@@ -435,8 +486,8 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         threads: a.threads,
         share_of_bound: fast_fig.achieved_gflops / gflops.max(1e-9),
         fast: fast_fig,
-        tch: tch_fig,
-        speedup,
+        tch: figures(tch_i),
+        speedup: w.ratio(0, tch_i),
         paths: named,
         matmul_gflops: gflops,
         manager_decisions_per_env_step: matches!(a.agent, BenchAgent::Fn | BenchAgent::Wn)
@@ -444,13 +495,7 @@ pub fn run(a: BenchLearnerArgs) -> anyhow::Result<std::process::ExitCode> {
         pytorch,
         fast_over_pytorch,
         pytorch_note,
-    };
-    if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print_table(&report);
-    }
-    Ok(std::process::ExitCode::SUCCESS)
+    })
 }
 
 /// The repository this binary was built from (where the PyTorch script
@@ -537,56 +582,33 @@ fn pytorch_reference(
     window_side: Option<usize>,
     horizon: Option<usize>,
 ) -> anyhow::Result<(Option<PytorchFigures>, Option<String>)> {
-    let agent = match a.agent {
-        BenchAgent::Gcp => "gcp",
-        BenchAgent::A2c => "a2c",
-        BenchAgent::Wn => "wn",
-        BenchAgent::Fn => "",
-    };
-    let skip = |note: String| -> anyhow::Result<(Option<PytorchFigures>, Option<String>)> {
-        anyhow::ensure!(
-            a.pytorch != PytorchMode::Required,
-            "--pytorch required: {note}"
-        );
-        Ok((None, Some(note)))
-    };
     if a.pytorch == PytorchMode::Off {
         return Ok((None, Some("PyTorch reference off (--pytorch off)".into())));
     }
-    if agent.is_empty() {
-        return skip("the PyTorch reference implements gcp, a2c and wn, not fn".into());
+    match run_reference(a, rollout, window_side, horizon) {
+        Ok(figures) => Ok((Some(figures), None)),
+        Err(note) => {
+            anyhow::ensure!(
+                a.pytorch != PytorchMode::Required,
+                "--pytorch required: {note}"
+            );
+            Ok((None, Some(note)))
+        }
     }
-    if a.world.layout.is_some() || a.world.max_steps.is_some() || a.world.balls.is_some() {
-        return skip(
-            "the PyTorch reference runs the embedded mazes with their default episodes only \
-             (no --layout, --max-steps, --balls)"
-                .into(),
-        );
-    }
-    if a.world.task != sim::Task::MultiGoal {
-        return skip("the PyTorch reference runs the MultiGoal task only".into());
-    }
+}
+
+/// The PyTorch reference's figures (see [`pytorch_reference`]), or why it
+/// did not run.
+fn run_reference(
+    a: &BenchLearnerArgs,
+    rollout: usize,
+    window_side: Option<usize>,
+    horizon: Option<usize>,
+) -> Result<PytorchFigures, String> {
+    let agent = reference_agent(a)?;
     let python = reference_python();
     let shown = python.display().to_string();
-    let install = "install it with `make bench-learner-python` (torch from PyPI into .venv)";
-    let probe = run_with_limit(
-        Command::new(&python).args(["-c", "import torch, worldgraph; print(torch.__version__)"]),
-        Duration::from_secs(120),
-    );
-    match probe {
-        Ok((true, _, _)) => {}
-        Ok((false, _, err)) => {
-            return skip(format!(
-                "no PyTorch reference: `import torch, worldgraph` fails under {shown} ({}); {install}",
-                tail(&err)
-            ));
-        }
-        Err(e) => {
-            return skip(format!(
-                "no PyTorch reference: cannot run {shown} ({e}); {install}"
-            ));
-        }
-    }
+    probe_reference_python(&python)?;
     let script = repo_root().join("benches/learner_pytorch.py");
     let mut cmd = Command::new(&python);
     cmd.arg(&script)
@@ -607,16 +629,65 @@ fn pytorch_reference(
     }
     // Its own start-up, warm-up and windows: generous, but bounded.
     let limit = Duration::from_secs_f64(a.seconds * 4.0 + 300.0);
-    let (ok, out, err) = match run_with_limit(&mut cmd, limit) {
-        Ok(r) => r,
-        Err(e) => return skip(format!("the PyTorch reference did not finish: {e}")),
-    };
+    let (ok, out, err) = run_with_limit(&mut cmd, limit)
+        .map_err(|e| format!("the PyTorch reference did not finish: {e}"))?;
     if !ok {
-        return skip(format!(
+        return Err(format!(
             "the PyTorch reference failed under {shown}: {}",
             tail(&err)
         ));
     }
+    reference_figures(&out, shown)
+}
+
+/// The reference's name of the agent of `a`, or why the reference cannot
+/// run these options.
+fn reference_agent(a: &BenchLearnerArgs) -> Result<&'static str, String> {
+    let agent = match a.agent {
+        BenchAgent::Gcp => "gcp",
+        BenchAgent::A2c => "a2c",
+        BenchAgent::Wn => "wn",
+        BenchAgent::Fn => {
+            return Err("the PyTorch reference implements gcp, a2c and wn, not fn".into());
+        }
+    };
+    if a.world.layout.is_some() || a.world.max_steps.is_some() || a.world.balls.is_some() {
+        return Err(
+            "the PyTorch reference runs the embedded mazes with their default episodes only \
+             (no --layout, --max-steps, --balls)"
+                .into(),
+        );
+    }
+    if a.world.task != sim::Task::MultiGoal {
+        return Err("the PyTorch reference runs the MultiGoal task only".into());
+    }
+    Ok(agent)
+}
+
+/// Whether `python` imports `torch` and `worldgraph`; if not, a note saying
+/// why and how to install them.
+fn probe_reference_python(python: &Path) -> Result<(), String> {
+    let shown = python.display();
+    let install = "install it with `make bench-learner-python` (torch from PyPI into .venv)";
+    let probe = run_with_limit(
+        Command::new(python).args(["-c", "import torch, worldgraph; print(torch.__version__)"]),
+        Duration::from_secs(120),
+    );
+    match probe {
+        Ok((true, _, _)) => Ok(()),
+        Ok((false, _, err)) => Err(format!(
+            "no PyTorch reference: `import torch, worldgraph` fails under {shown} ({}); {install}",
+            tail(&err)
+        )),
+        Err(e) => Err(format!(
+            "no PyTorch reference: cannot run {shown} ({e}); {install}"
+        )),
+    }
+}
+
+/// The figures in the reference's report, the last non-empty line of its
+/// stdout `out` (`python`: the Python that ran it), or what is wrong with it.
+fn reference_figures(out: &str, python: String) -> Result<PytorchFigures, String> {
     let report: serde_json::Value = match out
         .lines()
         .rev()
@@ -625,27 +696,24 @@ fn pytorch_reference(
     {
         Some(Ok(v)) => v,
         _ => {
-            return skip(format!(
+            return Err(format!(
                 "the PyTorch reference printed no JSON line: {}",
-                tail(&out)
+                tail(out)
             ));
         }
     };
     let Some(rate) = report["env_steps_per_sec"].as_f64().filter(|r| *r > 0.0) else {
-        return skip(format!("the PyTorch reference reported no rate: {report}"));
+        return Err(format!("the PyTorch reference reported no rate: {report}"));
     };
     let text = |k: &str| report[k].as_str().unwrap_or_default().to_string();
-    Ok((
-        Some(PytorchFigures {
-            env_steps_per_sec: rate,
-            variant: text("variant"),
-            torch_version: text("torch_version"),
-            env_share: report["env_share"].as_f64().unwrap_or(f64::NAN),
-            python: shown,
-            report,
-        }),
-        None,
-    ))
+    Ok(PytorchFigures {
+        env_steps_per_sec: rate,
+        variant: text("variant"),
+        torch_version: text("torch_version"),
+        env_share: report["env_share"].as_f64().unwrap_or(f64::NAN),
+        python,
+        report,
+    })
 }
 
 fn print_table(r: &LearnerBenchReport) {
