@@ -34,7 +34,7 @@ use clap::Args;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use super::soak_report::{KillCost, Recovery, SoakReport};
+use super::soak_report::{KillCost, Recovery, SoakReport, TrainingReport};
 use crate::pipeline::Role;
 use crate::pipeline::RunCmdArgs;
 use crate::roles::learner::PolicyKind;
@@ -544,8 +544,27 @@ fn memory_figures(
     (growth, max_rss)
 }
 
+/// Prints the report as a table: the stream, memory and round-trip
+/// figures, the training's (with `--learner-trains`), each kill, and the
+/// result.
 fn print_report(r: &SoakReport, dir: &Path) {
     println!("soak report ({})", dir.display());
+    print_pipeline_figures(r);
+    if let Some(t) = &r.training {
+        print_training(t);
+    }
+    if !r.recoveries.is_empty() {
+        println!("  kills:");
+        for k in &r.recoveries {
+            print_kill(k);
+        }
+    }
+    println!("  result: {}", if r.ok { "OK" } else { "FAILED" });
+}
+
+/// The report's lines on the pipeline: its start, batches, memory, round
+/// trips and shared memory left behind.
+fn print_pipeline_figures(r: &SoakReport) {
     println!("  {:<34} {:>12.1}", "minutes", r.minutes);
     match r.flowed_after_s {
         Some(s) => println!("  {:<34} {:>12.1}", "pipeline flowing after (s)", s),
@@ -585,64 +604,65 @@ fn print_report(r: &SoakReport, dir: &Path) {
         "shared-memory files left behind",
         r.shm_left_behind.len()
     );
-    if let Some(t) = &r.training {
-        println!(
-            "  training (π_g, checkpoint every {} iterations)",
-            t.checkpoint_every
-        );
-        for (what, n) in [
-            ("iterations run (all learners)", t.iterations_run),
-            ("iterations kept (final checkpoint)", t.iterations_kept),
-            ("iterations lost to learner kills", t.iterations_lost),
-            ("checkpoints written", t.checkpoints_written),
-            ("rollouts dropped (sim died)", t.rollouts_dropped),
-            ("learner processes", t.learner_processes as u64),
-        ] {
-            println!("    {what:<32} {n:>12}");
-        }
-        println!(
-            "    {:<32} {:>12.2}",
-            "median time per iteration (s)", t.median_iteration_s
-        );
-        match &t.final_checkpoint_error {
-            None => println!("    {:<32} {:>12}", "final π_g loads", "yes"),
-            Some(e) => println!("    final π_g does NOT load: {e}"),
-        }
+}
+
+/// The report's training section (`--learner-trains`).
+fn print_training(t: &TrainingReport) {
+    println!(
+        "  training (π_g, checkpoint every {} iterations)",
+        t.checkpoint_every
+    );
+    for (what, n) in [
+        ("iterations run (all learners)", t.iterations_run),
+        ("iterations kept (final checkpoint)", t.iterations_kept),
+        ("iterations lost to learner kills", t.iterations_lost),
+        ("checkpoints written", t.checkpoints_written),
+        ("rollouts dropped (sim died)", t.rollouts_dropped),
+        ("learner processes", t.learner_processes as u64),
+    ] {
+        println!("    {what:<32} {n:>12}");
     }
-    if !r.recoveries.is_empty() {
-        println!("  kills:");
-        for k in &r.recoveries {
-            let cost = match &k.training {
-                Some(KillCost {
-                    iterations_lost,
-                    pause_s,
-                }) => {
-                    let lost = iterations_lost.map_or(String::new(), |n| {
-                        format!(", {n} iteration{} lost", if n == 1 { "" } else { "s" })
-                    });
-                    let pause = pause_s.map_or(", no iteration after it".into(), |p| {
-                        format!(", training paused {p:.1} s")
-                    });
-                    format!("{lost}{pause}")
-                }
-                None => String::new(),
-            };
-            match k.recovered_after_s {
-                Some(s) => println!(
-                    "    {:>7.1} s  {:<8} recovered after {:.2} s{cost}",
-                    k.at_s,
-                    k.role.name(),
-                    s
-                ),
-                None => println!(
-                    "    {:>7.1} s  {:<8} NOT recovered{cost}",
-                    k.at_s,
-                    k.role.name()
-                ),
-            }
-        }
+    println!(
+        "    {:<32} {:>12.2}",
+        "median time per iteration (s)", t.median_iteration_s
+    );
+    match &t.final_checkpoint_error {
+        None => println!("    {:<32} {:>12}", "final π_g loads", "yes"),
+        Some(e) => println!("    final π_g does NOT load: {e}"),
     }
-    println!("  result: {}", if r.ok { "OK" } else { "FAILED" });
+}
+
+/// The report's line on one kill: when, which process, its recovery and,
+/// with `--learner-trains`, what it cost the training.
+fn print_kill(k: &Recovery) {
+    let cost = match &k.training {
+        Some(KillCost {
+            iterations_lost,
+            pause_s,
+        }) => {
+            let lost = iterations_lost.map_or(String::new(), |n| {
+                format!(", {n} iteration{} lost", if n == 1 { "" } else { "s" })
+            });
+            let pause = pause_s.map_or(", no iteration after it".into(), |p| {
+                format!(", training paused {p:.1} s")
+            });
+            format!("{lost}{pause}")
+        }
+        None => String::new(),
+    };
+    match k.recovered_after_s {
+        Some(s) => println!(
+            "    {:>7.1} s  {:<8} recovered after {:.2} s{cost}",
+            k.at_s,
+            k.role.name(),
+            s
+        ),
+        None => println!(
+            "    {:>7.1} s  {:<8} NOT recovered{cost}",
+            k.at_s,
+            k.role.name()
+        ),
+    }
 }
 
 #[cfg(test)]
