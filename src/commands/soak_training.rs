@@ -113,53 +113,12 @@ pub fn analyse(
             .copied()
             .unwrap_or(u64::MAX)
             .min(kill_ms + (PAUSE_WINDOW_S * 1000.0) as u64);
-        // Gaps between consecutive iterations that end after the kill and
-        // begin within the window; the first one may begin before the kill.
-        let first_after = all_ms.partition_point(|&t| t <= kill_ms);
-        let pause_s = (first_after < all_ms.len()).then(|| {
-            let from = first_after.saturating_sub(1);
-            let gaps = all_ms[from..]
-                .windows(2)
-                .take_while(|w| w[0] < window_end)
-                .map(|w| w[1] - w[0]);
-            let first = all_ms[first_after].saturating_sub(kill_ms);
-            gaps.fold(first, u64::max) as f64 / 1000.0
-        });
-        let iterations_lost = match (r.role, r.pid) {
-            (Role::Learner, Some(pid)) => {
-                let killed = procs.get(&u64::from(pid));
-                let next = procs
-                    .values()
-                    .filter(|p| p.start_ms > kill_ms)
-                    .min_by_key(|p| p.start_ms);
-                match (killed, next) {
-                    (Some(k), Some(n)) => Some(k.last_iteration.saturating_sub(n.resumed_from)),
-                    _ => None,
-                }
-            }
-            _ => None,
-        };
         r.training = Some(KillCost {
-            iterations_lost,
-            pause_s,
+            iterations_lost: iterations_lost(&procs, r, kill_ms),
+            pause_s: training_pause(&all_ms, kill_ms, window_end),
         });
     }
-    let ckpt = dir.join(CHECKPOINT_DIR);
-    let loaded = world.build().and_then(|(layout, cfg)| {
-        open(
-            &ckpt,
-            &layout,
-            envs,
-            cfg.task.name(),
-            cfg.task.num_actions(),
-            world.seed,
-        )
-    });
-    let (iterations_kept, final_checkpoint_error) = match loaded {
-        Ok((_, state)) if ckpt.join("gcp.ot").is_file() => (state.iterations, None),
-        Ok(_) => (0, Some(format!("no checkpoint in {}", ckpt.display()))),
-        Err(e) => (0, Some(format!("{e:#}"))),
-    };
+    let (iterations_kept, final_checkpoint_error) = final_checkpoint(dir, world, envs);
     TrainingReport {
         checkpoint_every,
         learner_processes: procs.len(),
@@ -178,6 +137,60 @@ pub fn analyse(
             .get(gaps.len() / 2)
             .map_or(f64::NAN, |&g| g as f64 / 1000.0),
         final_checkpoint_error,
+    }
+}
+
+/// The training pause (s) of a kill at `kill_ms`: the longest time without
+/// an iteration finishing (`all_ms`: every iteration's end, sorted) until
+/// `window_end`; `None` when no iteration finished after the kill.
+fn training_pause(all_ms: &[u64], kill_ms: u64, window_end: u64) -> Option<f64> {
+    // Gaps between consecutive iterations that end after the kill and
+    // begin within the window; the first one may begin before the kill.
+    let first_after = all_ms.partition_point(|&t| t <= kill_ms);
+    (first_after < all_ms.len()).then(|| {
+        let from = first_after.saturating_sub(1);
+        let gaps = all_ms[from..]
+            .windows(2)
+            .take_while(|w| w[0] < window_end)
+            .map(|w| w[1] - w[0]);
+        let first = all_ms[first_after].saturating_sub(kill_ms);
+        gaps.fold(first, u64::max) as f64 / 1000.0
+    })
+}
+
+/// For a learner kill (`r`, at `kill_ms`): the killed process's last
+/// iteration minus the one the next learner process resumed from; `None`
+/// for other kills, or when no learner started after it.
+fn iterations_lost(procs: &BTreeMap<u64, ProcLog>, r: &Recovery, kill_ms: u64) -> Option<u64> {
+    let (Role::Learner, Some(pid)) = (r.role, r.pid) else {
+        return None;
+    };
+    let killed = procs.get(&u64::from(pid))?;
+    let next = procs
+        .values()
+        .filter(|p| p.start_ms > kill_ms)
+        .min_by_key(|p| p.start_ms)?;
+    Some(killed.last_iteration.saturating_sub(next.resumed_from))
+}
+
+/// The iterations in the checkpoint left in `dir` (loaded into a fresh π_g
+/// of the soak's settings), or 0 and why it does not load.
+fn final_checkpoint(dir: &Path, world: &WorldArgs, envs: usize) -> (u64, Option<String>) {
+    let ckpt = dir.join(CHECKPOINT_DIR);
+    let loaded = world.build().and_then(|(layout, cfg)| {
+        open(
+            &ckpt,
+            &layout,
+            envs,
+            cfg.task.name(),
+            cfg.task.num_actions(),
+            world.seed,
+        )
+    });
+    match loaded {
+        Ok((_, state)) if ckpt.join("gcp.ot").is_file() => (state.iterations, None),
+        Ok(_) => (0, Some(format!("no checkpoint in {}", ckpt.display()))),
+        Err(e) => (0, Some(format!("{e:#}"))),
     }
 }
 
