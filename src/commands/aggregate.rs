@@ -166,17 +166,14 @@ where
     section_of(&scores_of(runs), layout)
 }
 
+/// The section of [`section`] over the test scores `s`: its introduction,
+/// the IQM table, then the probability of improvement.
 fn section_of<D, C, K>(s: &Scores, layout: &Layout<D, C, K>) -> String
 where
     D: Fn(&str) -> String,
     C: Fn(&str) -> usize,
     K: Fn(&str, &str) -> (usize, usize),
 {
-    let Layout {
-        display,
-        config_rank: order,
-        cell_rank,
-    } = layout;
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -192,6 +189,26 @@ where
          `scores.csv` beside the summaries.\n",
         LEVEL * 100.0
     );
+    md.push_str(&iqm_table(s, layout));
+    md.push_str(&improvement(s, layout));
+    md
+}
+
+/// The IQM table: every configuration's interquartile mean over its seeds
+/// with its stratified bootstrap interval, per maze and task in
+/// `cell_rank`'s order, configurations in `config_rank`'s.
+fn iqm_table<D, C, K>(s: &Scores, layout: &Layout<D, C, K>) -> String
+where
+    D: Fn(&str) -> String,
+    C: Fn(&str) -> usize,
+    K: Fn(&str, &str) -> (usize, usize),
+{
+    let Layout {
+        display,
+        config_rank: order,
+        cell_rank,
+    } = layout;
+    let mut md = String::new();
     let mut cells: Vec<(String, String)> =
         s.keys().map(|(m, t, _)| (m.clone(), t.clone())).collect();
     cells.dedup();
@@ -224,24 +241,54 @@ where
             );
         }
     }
+    md
+}
+
+/// The probability of improvement: every comparison of [`comparisons`]
+/// pooled over the mazes and tasks where both configurations ran, then the
+/// same per maze and task; a single line saying so when no comparison had
+/// both configurations on one maze and task.
+fn improvement<D, C, K>(s: &Scores, layout: &Layout<D, C, K>) -> String
+where
+    D: Fn(&str) -> String,
+    C: Fn(&str) -> usize,
+    K: Fn(&str, &str) -> (usize, usize),
+{
+    let mut md = String::new();
     let _ = writeln!(
         md,
         "\n### Probability of improvement\n\n\
          | X over Y | mazes × tasks | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---:|---:|---|"
     );
-    let rows = comparisons(s, display, order);
+    let rows = comparisons(s, &layout.display, &layout.config_rank);
     let strata: Vec<Vec<Stratum>> = rows
         .iter()
-        .map(|(x, y, _)| paired_strata(s, x, y, cell_rank))
+        .map(|(x, y, _)| paired_strata(s, x, y, &layout.cell_rank))
         .collect();
-    let mut any = false;
-    for ((_, _, what), here) in rows.iter().zip(&strata) {
+    let pooled = pooled_rows(&rows, &strata);
+    if pooled.is_empty() {
+        let _ = writeln!(
+            md,
+            "| (no pair of configurations ran on the same maze and task) | | | |\n"
+        );
+        return md;
+    }
+    md.push_str(&pooled);
+    md.push_str(&per_cell_rows(&rows, &strata));
+    md
+}
+
+/// The pooled rows of the probability of improvement, one per comparison
+/// with at least one maze and task where both ran (`strata[i]` those of
+/// `rows[i]`); empty when there is none.
+fn pooled_rows(rows: &[(String, String, String)], strata: &[Vec<Stratum>]) -> String {
+    let mut md = String::new();
+    for ((_, _, what), here) in rows.iter().zip(strata) {
         let xs: Vec<Vec<f64>> = here.iter().map(|(_, _, x, _)| x.to_vec()).collect();
         let ys: Vec<Vec<f64>> = here.iter().map(|(_, _, _, y)| y.to_vec()).collect();
         let Some(e) = improvement_interval(&xs, &ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) else {
             continue;
         };
-        any = true;
         let nx: usize = xs.iter().map(Vec::len).sum();
         let ny: usize = ys.iter().map(Vec::len).sum();
         let _ = writeln!(
@@ -251,13 +298,14 @@ where
             interval_text(&e, 2)
         );
     }
-    if !any {
-        let _ = writeln!(
-            md,
-            "| (no pair of configurations ran on the same maze and task) | | | |\n"
-        );
-        return md;
-    }
+    md
+}
+
+/// The per maze and task table of the probability of improvement: each
+/// comparison of `rows` on each of its strata alone, the bootstrap
+/// resampling that cell's runs.
+fn per_cell_rows(rows: &[(String, String, String)], strata: &[Vec<Stratum>]) -> String {
+    let mut md = String::new();
     let _ = writeln!(
         md,
         "\n#### Per maze and task\n\n\
@@ -265,7 +313,7 @@ where
          runs).\n\n\
          | X over Y | maze | task | runs of X / of Y | P(X > Y) [95 % CI] |\n|---|---|---|---:|---|"
     );
-    for ((_, _, what), here) in rows.iter().zip(&strata) {
+    for ((_, _, what), here) in rows.iter().zip(strata) {
         for &(m, t, x, y) in here {
             let (xs, ys) = ([x.to_vec()], [y.to_vec()]);
             if let Some(e) = improvement_interval(&xs, &ys, LEVEL, BOOTSTRAP_REPS, BOOTSTRAP_SEED) {
