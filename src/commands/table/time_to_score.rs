@@ -266,8 +266,11 @@ fn repeats(reference: &[RunResult], grid_a2c: &[&RunResult]) -> (usize, usize) {
     (same, both)
 }
 
-/// The time-to-score section: its table, one reach-share figure per maze
-/// and task (written into `figures`, linked as `fig_link`).
+/// The time-to-score section: its table, a row per configuration of each
+/// maze and task of `pairs` (the threshold `share` of the best cell's
+/// score there), the notes on where each reference row came from, and one
+/// reach-share figure per maze and task (written into `figures`, linked as
+/// `fig_link`).
 pub(super) fn section(
     cells: &Cells,
     pairs: &[(String, String)],
@@ -276,6 +279,40 @@ pub(super) fn section(
     figures: &Path,
     fig_link: &str,
 ) -> anyhow::Result<String> {
+    let mut tts = intro(share, reference.is_some());
+    let mut notes = Vec::new();
+    for (m, t) in pairs {
+        let Some(threshold) = threshold(cells, m, t, share) else {
+            let _ = writeln!(
+                tts,
+                "| {m} | {t} | — | every configuration | 0 | — | — | — |"
+            );
+            continue;
+        };
+        let longer = reference.and_then(|r| r.runs.get(&(m.clone(), t.clone())));
+        let mut here = configurations(cells, m, t);
+        let chosen = reference_row(cells, m, t, threshold, longer, &mut here, &mut notes);
+        let reach_series = rows(&mut tts, m, t, threshold, &here, chosen.name.as_ref());
+        reach_chart(figures, m, t, threshold, reach_series, chosen.longer_used)?;
+    }
+    let _ = writeln!(tts);
+    for n in &notes {
+        let _ = writeln!(tts, "{n}\n");
+    }
+    for (m, t) in pairs {
+        let file = format!("time-to-score-{m}-{t}.png");
+        if figures.join(&file).exists() {
+            let _ = writeln!(tts, "![time to score, {m} {t}]({fig_link}/{file})");
+        }
+    }
+    let _ = writeln!(tts);
+    Ok(tts)
+}
+
+/// The section's heading and what it measures (the threshold at `share` of
+/// the best cell, censoring, the speed-up), the reference row explained
+/// when `--reference` named one, and the table's head.
+fn intro(share: f64, has_reference: bool) -> String {
     let mut tts = String::new();
     let _ = writeln!(
         tts,
@@ -292,7 +329,7 @@ pub(super) fn section(
          figures plot the share of seeds that reached the threshold against env steps.\n",
         100.0 * share
     );
-    if reference.is_some() {
+    if has_reference {
         let _ = writeln!(
             tts,
             "Where a maze and task has one and this grid's own A2C left a seed short of \
@@ -306,137 +343,178 @@ pub(super) fn section(
         tts,
         "| maze | task | threshold | configuration | reached | env steps | wall s | speed-up over A2C (steps / wall) |\n|---|---|---:|---|---:|---:|---:|---:|"
     );
-    let mut notes = Vec::new();
-    for (m, t) in pairs {
-        // The best cell: the highest mean over seeds of the runs' best
-        // validation scores (one lucky seed does not set the bar).
-        let best = cells
+    tts
+}
+
+/// The threshold of maze `m` and task `t`: `share` of the best cell's score
+/// there, the highest mean over seeds of the runs' best validation scores
+/// (one lucky seed does not set the bar); `None` when no cell's score is
+/// positive.
+fn threshold(cells: &Cells, m: &str, t: &str, share: f64) -> Option<f64> {
+    let best = cells
+        .iter()
+        .filter(|((cm, ct, _), _)| cm == m && ct == t)
+        .map(|(_, rs)| mean_std(&rs.iter().map(|r| r.best_validation).collect::<Vec<_>>()).0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if best <= 0.0 {
+        return None;
+    }
+    Some(share * best)
+}
+
+/// The configurations of maze `m` and task `t` by their paper's names, with
+/// their runs, in Table 1's order (any other configuration after).
+fn configurations<'a>(cells: &Cells<'a>, m: &str, t: &str) -> Vec<(String, Vec<&'a RunResult>)> {
+    let mut here: Vec<(String, Vec<&RunResult>)> = cells
+        .iter()
+        .filter(|((cm, ct, _), _)| cm == m && ct == t)
+        .map(|((_, _, c), rs)| (display_config(c), rs.clone()))
+        .collect();
+    here.sort_by_key(|(c, _)| {
+        TABLE1_CONFIGS
             .iter()
-            .filter(|((cm, ct, _), _)| cm == m && ct == t)
-            .map(|(_, rs)| mean_std(&rs.iter().map(|r| r.best_validation).collect::<Vec<_>>()).0)
-            .fold(f64::NEG_INFINITY, f64::max);
-        if best <= 0.0 {
-            let _ = writeln!(
-                tts,
-                "| {m} | {t} | — | every configuration | 0 | — | — | — |"
-            );
-            continue;
+            .position(|x| display_config(x) == *c)
+            .unwrap_or(usize::MAX)
+    });
+    here
+}
+
+/// The reference row of a maze and task: its name in the table (`None`
+/// without an A2C run) and whether it is the longer A2C of `--reference`.
+struct ReferenceRow {
+    name: Option<String>,
+    longer_used: bool,
+}
+
+/// Chooses the reference row of maze `m` and task `t`: the longer A2C
+/// `longer` where the grid's own A2C left a seed short of `threshold`, put
+/// first in `here`, else the grid's own. Where every seed of the grid's A2C
+/// reached it, its row is exact, and its wall seconds were measured beside
+/// the grid's runs, not under whatever load the longer runs had. Pushes
+/// onto `notes` which result set the longer A2C came from, used or not.
+fn reference_row<'a>(
+    cells: &Cells,
+    m: &str,
+    t: &str,
+    threshold: f64,
+    longer: Option<&'a (String, Vec<RunResult>)>,
+    here: &mut Vec<(String, Vec<&'a RunResult>)>,
+    notes: &mut Vec<String>,
+) -> ReferenceRow {
+    let grid_a2c = cells.get(&(m.to_string(), t.to_string(), "a2c".to_string()));
+    let grid_a2c_reached = grid_a2c.is_some_and(|g| Times::of(g, threshold).all_reached());
+    // Whether the longer runs are the grid's A2C runs continued.
+    let repeat_note = |rs: &[RunResult]| {
+        grid_a2c.map_or(String::new(), |g| {
+            let (same, both) = repeats(rs, g);
+            format!(
+                "; its first {} env steps repeat this grid's A2C run of the same seed at \
+                 every validation, to the last digit, on {same} of the {both} seeds both ran",
+                g.iter().map(|r| r.env_steps).max().unwrap_or(0)
+            )
+        })
+    };
+    let longer_used = longer.is_some() && !grid_a2c_reached;
+    let name = match longer {
+        Some((dir, rs)) if longer_used => {
+            let steps = rs.iter().map(|r| r.env_steps).max().unwrap_or(0);
+            let name = format!("A2C, {:.2}M env steps (reference)", steps as f64 / 1e6);
+            notes.push(format!(
+                "{m} {t}: the reference is `{dir}`{}.",
+                repeat_note(rs)
+            ));
+            here.insert(0, (name.clone(), rs.iter().collect()));
+            Some(name)
         }
-        let threshold = share * best;
-        let mut here: Vec<(String, Vec<&RunResult>)> = cells
-            .iter()
-            .filter(|((cm, ct, _), _)| cm == m && ct == t)
-            .map(|((_, _, c), rs)| (display_config(c), rs.clone()))
-            .collect();
-        here.sort_by_key(|(c, _)| {
-            TABLE1_CONFIGS
-                .iter()
-                .position(|x| display_config(x) == *c)
-                .unwrap_or(usize::MAX)
-        });
-        let grid_a2c = cells.get(&(m.clone(), t.clone(), "a2c".to_string()));
-        // The reference row: the longer A2C where the grid's own A2C left a
-        // seed short of the threshold, else the grid's own. Where every
-        // seed of the grid's A2C reached it, its row is exact, and its wall
-        // seconds were measured beside the grid's runs, not under whatever
-        // load the longer runs had.
-        let grid_a2c_reached = grid_a2c.is_some_and(|g| Times::of(g, threshold).all_reached());
-        let longer = reference.and_then(|r| r.runs.get(&(m.clone(), t.clone())));
-        // Whether the longer runs are the grid's A2C runs continued.
-        let repeat_note = |rs: &[RunResult]| {
-            grid_a2c.map_or(String::new(), |g| {
-                let (same, both) = repeats(rs, g);
-                format!(
-                    "; its first {} env steps repeat this grid's A2C run of the same seed at \
-                     every validation, to the last digit, on {same} of the {both} seeds both ran",
-                    g.iter().map(|r| r.env_steps).max().unwrap_or(0)
-                )
-            })
-        };
-        let longer_used = longer.is_some() && !grid_a2c_reached;
-        let reference_name = match longer {
-            Some((dir, rs)) if longer_used => {
-                let steps = rs.iter().map(|r| r.env_steps).max().unwrap_or(0);
-                let name = format!("A2C, {:.2}M env steps (reference)", steps as f64 / 1e6);
+        unused => {
+            if let Some((dir, rs)) = unused {
                 notes.push(format!(
-                    "{m} {t}: the reference is `{dir}`{}.",
+                    "{m} {t}: every seed of this grid's own A2C reached the threshold \
+                     within the grid's budget, so its row is the reference, not the longer \
+                     A2C `{dir}`{}.",
                     repeat_note(rs)
                 ));
-                here.insert(0, (name.clone(), rs.iter().collect()));
-                Some(name)
             }
-            unused => {
-                if let Some((dir, rs)) = unused {
-                    notes.push(format!(
-                        "{m} {t}: every seed of this grid's own A2C reached the threshold \
-                         within the grid's budget, so its row is the reference, not the longer \
-                         A2C `{dir}`{}.",
-                        repeat_note(rs)
-                    ));
-                }
-                grid_a2c.map(|_| display_config("a2c"))
-            }
+            grid_a2c.map(|_| display_config("a2c"))
+        }
+    };
+    ReferenceRow { name, longer_used }
+}
+
+/// Writes the rows of maze `m` and task `t` into `tts`, one per
+/// configuration of `here`: how many seeds reached `threshold`, their mean
+/// time, the speed-up over the row named `reference`. Returns each row's
+/// share of seeds at the threshold, for the figure.
+fn rows(
+    tts: &mut String,
+    m: &str,
+    t: &str,
+    threshold: f64,
+    here: &[(String, Vec<&RunResult>)],
+    reference: Option<&String>,
+) -> Vec<Series> {
+    let reference_times = reference.map(|name| {
+        let rs = &here.iter().find(|(c, _)| c == name).expect("inserted").1;
+        Times::of(rs, threshold)
+    });
+    let mut reach_series = Vec::new();
+    for (c, rs) in here {
+        let times = Times::of(rs, threshold);
+        let reached = times.reached();
+        let is_reference = reference == Some(c);
+        let speed = match &reference_times {
+            _ if is_reference => "1 (reference)".to_string(),
+            Some(a) => speed_up(a, &times).unwrap_or_else(|| "—".to_string()),
+            None => "— (no A2C run)".to_string(),
         };
-        let reference_times = reference_name.as_ref().map(|name| {
-            let rs = &here.iter().find(|(c, _)| c == name).expect("inserted").1;
-            Times::of(rs, threshold)
+        let (steps, wall) = if reached.is_empty() {
+            ("—".to_string(), "—".to_string())
+        } else {
+            let (sm, ss) = mean_std(&reached.iter().map(|x| x.0 as f64).collect::<Vec<_>>());
+            let (wm, ws) = mean_std(&reached.iter().map(|x| x.1).collect::<Vec<_>>());
+            (format!("{sm:.0} ± {ss:.0}"), format!("{wm:.0} ± {ws:.0}"))
+        };
+        let _ = writeln!(
+            tts,
+            "| {m} | {t} | {threshold:.3} | {c} | {}/{} | {steps} | {wall} | {speed} |",
+            reached.len(),
+            rs.len()
+        );
+        reach_series.push(Series {
+            name: c.clone(),
+            points: reach_share(rs, &reached),
         });
-        let mut reach_series = Vec::new();
-        for (c, rs) in &here {
-            let times = Times::of(rs, threshold);
-            let reached = times.reached();
-            let is_reference = reference_name.as_ref() == Some(c);
-            let speed = match &reference_times {
-                _ if is_reference => "1 (reference)".to_string(),
-                Some(a) => speed_up(a, &times).unwrap_or_else(|| "—".to_string()),
-                None => "— (no A2C run)".to_string(),
-            };
-            let (steps, wall) = if reached.is_empty() {
-                ("—".to_string(), "—".to_string())
-            } else {
-                let (sm, ss) = mean_std(&reached.iter().map(|x| x.0 as f64).collect::<Vec<_>>());
-                let (wm, ws) = mean_std(&reached.iter().map(|x| x.1).collect::<Vec<_>>());
-                (format!("{sm:.0} ± {ss:.0}"), format!("{wm:.0} ± {ws:.0}"))
-            };
-            let _ = writeln!(
-                tts,
-                "| {m} | {t} | {threshold:.3} | {c} | {}/{} | {steps} | {wall} | {speed} |",
-                reached.len(),
-                rs.len()
-            );
-            reach_series.push(Series {
-                name: c.clone(),
-                points: reach_share(rs, &reached),
-            });
-        }
-        if longer_used {
-            // Each configuration keeps its colour of the other charts; the
-            // reference takes the palette's eleventh.
-            reach_series.rotate_left(1);
-        }
-        let file = format!("time-to-score-{m}-{t}.png");
-        LineChart {
-            title: format!("{m} {t}: seeds at the threshold {threshold:.2}"),
-            x_label: "env steps".into(),
-            y_label: "share of seeds".into(),
-            series: reach_series,
-            x_scale: XScale::Linear,
-        }
-        .render(900, 520)
-        .save_png(&figures.join(&file))?;
     }
-    let _ = writeln!(tts);
-    for n in &notes {
-        let _ = writeln!(tts, "{n}\n");
+    reach_series
+}
+
+/// Saves the reach-share figure of maze `m` and task `t` into `figures`:
+/// the share of each configuration's seeds at `threshold` against env
+/// steps. When the longer A2C leads the series (`longer_used`), it is moved
+/// last, so that each configuration keeps its colour of the other charts;
+/// the reference takes the palette's eleventh.
+fn reach_chart(
+    figures: &Path,
+    m: &str,
+    t: &str,
+    threshold: f64,
+    mut reach_series: Vec<Series>,
+    longer_used: bool,
+) -> anyhow::Result<()> {
+    if longer_used {
+        reach_series.rotate_left(1);
     }
-    for (m, t) in pairs {
-        let file = format!("time-to-score-{m}-{t}.png");
-        if figures.join(&file).exists() {
-            let _ = writeln!(tts, "![time to score, {m} {t}]({fig_link}/{file})");
-        }
+    let file = format!("time-to-score-{m}-{t}.png");
+    LineChart {
+        title: format!("{m} {t}: seeds at the threshold {threshold:.2}"),
+        x_label: "env steps".into(),
+        y_label: "share of seeds".into(),
+        series: reach_series,
+        x_scale: XScale::Linear,
     }
-    let _ = writeln!(tts);
-    Ok(tts)
+    .render(900, 520)
+    .save_png(&figures.join(&file))?;
+    Ok(())
 }
 
 /// The share of `rs`' seeds at the threshold against env steps, a step
