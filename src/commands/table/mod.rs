@@ -18,14 +18,10 @@ use crate::results::{RunResult, read_all_runs};
 
 mod budgets;
 mod paper;
+mod tables;
 mod time_to_score;
 
-use self::budgets::budget_label;
-
-use self::paper::{
-    MAZES, PAPER_ITERATIONS, TABLE1_CONFIGS, TABLE1_TASKS, TABLE2_CONFIGS, TASKS, paper1, paper2,
-    rank,
-};
+use self::paper::{MAZES, PAPER_ITERATIONS, TABLE1_CONFIGS, TASKS, rank};
 
 /// `table` options.
 #[derive(Debug, Clone, Args)]
@@ -78,33 +74,6 @@ fn mean_std(xs: &[f64]) -> (f64, f64) {
         0.0
     };
     (m, v.sqrt())
-}
-
-/// A cell: mean ± std of the test scores (×`scale`), "Fail" when every
-/// seed failed by the paper's rule, the seed count when not the grid's 3
-/// and how many seeds failed.
-fn cell_text(runs: Option<&Vec<&RunResult>>, scale: f64, digits: usize) -> String {
-    let Some(runs) = runs.filter(|r| !r.is_empty()) else {
-        return "—".to_string();
-    };
-    let fails = runs.iter().filter(|r| r.failed()).count();
-    if fails == runs.len() {
-        return if runs.len() == 3 {
-            "Fail".to_string()
-        } else {
-            format!("Fail (n={})", runs.len())
-        };
-    }
-    let scores: Vec<f64> = runs.iter().map(|r| r.test_score * scale).collect();
-    let (m, s) = mean_std(&scores);
-    let mut t = format!("{m:.digits$} ± {s:.digits$}");
-    if runs.len() != 3 {
-        let _ = write!(t, " (n={})", runs.len());
-    }
-    if fails > 0 {
-        let _ = write!(t, " ({fails} fail)");
-    }
-    t
 }
 
 /// Runs `worldgraph table`.
@@ -228,78 +197,8 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     md.push_str(&budgets::section(&runs, &mazes));
 
     let headline_at = md.len();
-    // Table 1.
-    let t1_tasks: Vec<&str> = TABLE1_TASKS
-        .iter()
-        .copied()
-        .filter(|t| runs.iter().any(|r| r.task == *t))
-        .collect();
-    if !t1_tasks.is_empty() {
-        let _ = writeln!(
-            md,
-            "## Table 1: MultiGoal, MultiGoal-Sparse, MultiGoal-Stochastic (mean test reward)\n"
-        );
-        for t in &t1_tasks {
-            let _ = writeln!(md, "### {t}\n");
-            let mut head = "| configuration |".to_string();
-            let mut rule = "|---|".to_string();
-            for m in &mazes {
-                let _ = write!(head, " {} | paper |", budget_label(&runs, m));
-                rule.push_str("---:|---:|");
-            }
-            let _ = writeln!(md, "{head}\n{rule}");
-            for c in TABLE1_CONFIGS {
-                let mut line = format!("| {} |", display_config(c));
-                for m in &mazes {
-                    let k = (m.to_string(), t.to_string(), c.to_string());
-                    let _ = write!(
-                        line,
-                        " {} | {} |",
-                        cell_text(cells.get(&k), 1.0, 3),
-                        paper1(c, t, m)
-                    );
-                }
-                let _ = writeln!(md, "{line}");
-            }
-            let _ = writeln!(md);
-        }
-    }
-
-    // Table 2.
-    if runs.iter().any(|r| r.task == "doorkey") {
-        let _ = writeln!(md, "## Table 2: Door-Key (test success rate, %)\n");
-        // The flat A2C, which the paper omits from Table 2, leads the
-        // columns when it was run.
-        let a2c = runs
-            .iter()
-            .any(|r| r.task == "doorkey" && r.config == "a2c");
-        let columns: Vec<&str> = a2c
-            .then_some("a2c")
-            .into_iter()
-            .chain(TABLE2_CONFIGS)
-            .collect();
-        let mut head = "| maze |".to_string();
-        let mut rule = "|---|".to_string();
-        for &c in &columns {
-            let _ = write!(head, " {} | paper |", display_config(c));
-            rule.push_str("---:|---:|");
-        }
-        let _ = writeln!(md, "{head}\n{rule}");
-        for m in &mazes {
-            let mut line = format!("| {} |", budget_label(&runs, m));
-            for &c in &columns {
-                let k = (m.to_string(), "doorkey".to_string(), c.to_string());
-                let _ = write!(
-                    line,
-                    " {} | {} |",
-                    cell_text(cells.get(&k), 100.0, 0),
-                    paper2(c, m)
-                );
-            }
-            let _ = writeln!(md, "{line}");
-        }
-        let _ = writeln!(md);
-    }
+    md.push_str(&tables::table1(&runs, &cells, &mazes));
+    md.push_str(&tables::table2(&runs, &cells, &mazes));
 
     // The rliable protocol's aggregates.
     md.push_str(&super::aggregate::section(
