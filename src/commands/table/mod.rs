@@ -5,7 +5,7 @@
 //! the paper's Figure 4 (mean and spread over seeds), into
 //! `docs/results.md` and `docs/figures/`.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -76,7 +76,8 @@ fn mean_std(xs: &[f64]) -> (f64, f64) {
     (m, v.sqrt())
 }
 
-/// Runs `worldgraph table`.
+/// Runs `worldgraph table`: reads the result set (and the `--reference`
+/// sets), writes the README with its figures, then `scores.csv`.
 pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let out = a.out.clone().unwrap_or_else(|| a.results.join("README.md"));
     anyhow::ensure!(
@@ -85,7 +86,52 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         out.display(),
         out.display()
     );
-    let (runs, nested) = read_all_runs(&a.results)?;
+    let (runs, nested) = read_result_set(&a.results)?;
+    anyhow::ensure!(
+        a.threshold > 0.0 && a.threshold <= 1.0,
+        "--threshold must be in (0, 1]"
+    );
+    let reference = load_reference(&a.reference, &runs)?;
+    let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let figures = a.figures.clone().unwrap_or_else(|| out_dir.join("figures"));
+    std::fs::create_dir_all(&figures)
+        .with_context(|| format!("cannot create {}", figures.display()))?;
+    let fig_link = pathdiff(&figures, &out_dir);
+    let cells = cells_of(&runs);
+    let md = readme(
+        &a,
+        &runs,
+        &nested,
+        &cells,
+        reference.as_ref(),
+        &figures,
+        &fig_link,
+    )?;
+    write_atomic(&out, md.as_bytes())?;
+    let scores = a
+        .scores
+        .clone()
+        .unwrap_or_else(|| a.results.join("scores.csv"));
+    write_atomic(
+        &scores,
+        super::aggregate::scores_csv(&runs, PAPER_ITERATIONS).as_bytes(),
+    )?;
+    eprintln!(
+        "table: {} runs in {} cells → {} (figures in {}, one row per run in {})",
+        runs.len(),
+        cells.len(),
+        out.display(),
+        figures.display(),
+        scores.display()
+    );
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// The run summaries of the result set `results` and the result sets below
+/// it, which are not read (each is named on stderr); an error when there
+/// is no summary to read.
+fn read_result_set(results: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf>)> {
+    let (runs, nested) = read_all_runs(results)?;
     for n in &nested {
         eprintln!(
             "table: {} is a result set of its own (another grid or budget), not read: `worldgraph table {}`",
@@ -96,7 +142,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     anyhow::ensure!(
         !runs.is_empty(),
         "no run summaries under {} (`worldgraph experiment GRID.toml` writes them){}",
-        a.results.display(),
+        results.display(),
         if nested.is_empty() {
             String::new()
         } else {
@@ -110,39 +156,95 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             )
         }
     );
-    anyhow::ensure!(
-        a.threshold > 0.0 && a.threshold <= 1.0,
-        "--threshold must be in (0, 1]"
-    );
-    let reference = if a.reference.is_empty() {
-        None
-    } else {
-        let (r, left_out) = time_to_score::Reference::load(&a.reference, &runs)?;
-        for note in left_out {
-            eprintln!("table: {note}; left out");
-        }
-        Some(r)
-    };
-    let out_dir = out.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let figures = a.figures.clone().unwrap_or_else(|| out_dir.join("figures"));
-    std::fs::create_dir_all(&figures)
-        .with_context(|| format!("cannot create {}", figures.display()))?;
-    let fig_link = pathdiff(&figures, &out_dir);
+    Ok((runs, nested))
+}
+
+/// The longer flat A2C of `--reference` (`None` without one), checked
+/// against the grid's `runs`; what it leaves out is named on stderr.
+fn load_reference(
+    dirs: &[PathBuf],
+    runs: &[RunResult],
+) -> anyhow::Result<Option<time_to_score::Reference>> {
+    if dirs.is_empty() {
+        return Ok(None);
+    }
+    let (r, left_out) = time_to_score::Reference::load(dirs, runs)?;
+    for note in left_out {
+        eprintln!("table: {note}; left out");
+    }
+    Ok(Some(r))
+}
+
+/// The runs grouped by cell (maze, task, configuration).
+fn cells_of(runs: &[RunResult]) -> Cells<'_> {
     let mut cells: Cells = BTreeMap::new();
-    for r in &runs {
+    for r in runs {
         cells
             .entry((r.maze.clone(), r.task.clone(), r.config.clone()))
             .or_default()
             .push(r);
     }
+    cells
+}
+
+/// The README, section by section: the preamble, the budgets, the time to
+/// score (the headline, put right after the budgets), the paper's Tables 1
+/// and 2 (section 5), the rliable aggregates, the budget per cell, and the
+/// validation curves (the paper's Figure 4, then every configuration's),
+/// whose figures are saved into `figures` and linked as `fig_link`.
+fn readme(
+    a: &TableArgs,
+    runs: &[RunResult],
+    nested: &[PathBuf],
+    cells: &Cells,
+    reference: Option<&time_to_score::Reference>,
+    figures: &Path,
+    fig_link: &str,
+) -> anyhow::Result<String> {
     let mazes: Vec<&str> = MAZES
         .iter()
         .copied()
         .filter(|m| runs.iter().any(|r| r.maze == *m))
         .collect();
+    let mut pairs: Vec<(String, String)> = cells
+        .keys()
+        .map(|(m, t, _)| (m.clone(), t.clone()))
+        .collect();
+    pairs.dedup();
+    let mut md = preamble(a, runs, nested);
+    md.push_str(&budgets::section(runs, &mazes));
+    md.push_str(&time_to_score::section(
+        cells,
+        &pairs,
+        a.threshold,
+        reference,
+        figures,
+        fig_link,
+    )?);
+    md.push_str(&tables::table1(runs, cells, &mazes));
+    md.push_str(&tables::table2(runs, cells, &mazes));
+    md.push_str(&super::aggregate::section(
+        runs,
+        &super::aggregate::Layout {
+            display: display_config,
+            config_rank: |c: &str| rank(&TABLE1_CONFIGS, c),
+            cell_rank: |m: &str, t: &str| (rank(&MAZES, m), rank(&TASKS, t)),
+        },
+    ));
+    md.push_str(&budgets::per_cell(runs, cells, &mazes));
+    md.push_str(&curves::figure4(cells, &pairs, figures, fig_link)?);
+    md.push_str(&curves::every_configuration(
+        cells, &pairs, figures, fig_link,
+    )?);
+    Ok(md)
+}
+
+/// The README's opening: its title, the command that generated it, the
+/// result sets below `a.results` that were not read, the protocol (section
+/// 5) and the commits the runs were made on.
+fn preamble(a: &TableArgs, runs: &[RunResult], nested: &[PathBuf]) -> String {
     let mut md = String::new();
-    let commits: std::collections::BTreeSet<&str> =
-        runs.iter().map(|r| r.commit.as_str()).collect();
+    let commits: BTreeSet<&str> = runs.iter().map(|r| r.commit.as_str()).collect();
     let _ = writeln!(
         md,
         "# Results: the paper's Tables 1 and 2 on this machine\n\n\
@@ -193,63 +295,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-
-    md.push_str(&budgets::section(&runs, &mazes));
-
-    let headline_at = md.len();
-    md.push_str(&tables::table1(&runs, &cells, &mazes));
-    md.push_str(&tables::table2(&runs, &cells, &mazes));
-
-    // The rliable protocol's aggregates.
-    md.push_str(&super::aggregate::section(
-        &runs,
-        &super::aggregate::Layout {
-            display: display_config,
-            config_rank: |c: &str| rank(&TABLE1_CONFIGS, c),
-            cell_rank: |m: &str, t: &str| (rank(&MAZES, m), rank(&TASKS, t)),
-        },
-    ));
-
-    md.push_str(&budgets::per_cell(&runs, &cells, &mazes));
-
-    // Time to score: the headline, put after the budgets.
-    let mut pairs: Vec<(String, String)> = cells
-        .keys()
-        .map(|(m, t, _)| (m.clone(), t.clone()))
-        .collect();
-    pairs.dedup();
-    let tts = time_to_score::section(
-        &cells,
-        &pairs,
-        a.threshold,
-        reference.as_ref(),
-        &figures,
-        &fig_link,
-    )?;
-    md.insert_str(headline_at, &tts);
-
-    md.push_str(&curves::figure4(&cells, &pairs, &figures, &fig_link)?);
-    md.push_str(&curves::every_configuration(
-        &cells, &pairs, &figures, &fig_link,
-    )?);
-    write_atomic(&out, md.as_bytes())?;
-    let scores = a
-        .scores
-        .clone()
-        .unwrap_or_else(|| a.results.join("scores.csv"));
-    write_atomic(
-        &scores,
-        super::aggregate::scores_csv(&runs, PAPER_ITERATIONS).as_bytes(),
-    )?;
-    eprintln!(
-        "table: {} runs in {} cells → {} (figures in {}, one row per run in {})",
-        runs.len(),
-        cells.len(),
-        out.display(),
-        figures.display(),
-        scores.display()
-    );
-    Ok(std::process::ExitCode::SUCCESS)
+    md
 }
 
 /// The paper's name of configuration `c` (`WN V_p + traversal + π_g
