@@ -2,8 +2,9 @@
 //! Tables 1 and 2 (section 5), each cell mean ± std over the training seeds
 //! with the paper's value beside it, the budget every cell used, the time
 //! each configuration took to reach a score, and validation curves like
-//! the paper's Figure 4 (mean and spread over seeds), into
-//! `docs/results.md` and `docs/figures/`.
+//! the paper's Figure 4 (mean and spread over seeds), into the result
+//! set's own `README.md` with its figures in `figures/` beside it
+//! (`--out` elsewhere).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
