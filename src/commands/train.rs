@@ -16,7 +16,7 @@ use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use learner::batch_env::{BatchEnvironment, InProcess};
 use learner::hrl::{AgentConfig, AgentKind, Candidates, EpisodeTrace, EvalResult, IterationStats};
-use learner::run::artefact::{build_agent, check_world_graph_layout};
+use learner::run::artefact::{check_world_graph_layout, known_candidates, load_inputs};
 use learner::run::config::{
     TrainConfig, auto_values, check_budget, config_with_overrides, resolve_auto, trained_env_steps,
 };
@@ -268,25 +268,26 @@ fn world_graph_dir(a: &TrainArgs, layout: &Layout) -> anyhow::Result<Option<Path
 /// stderr.
 fn print_config(a: &TrainArgs, mut cfg: TrainConfig, layout: &Layout) -> anyhow::Result<()> {
     let world_graph = world_graph_dir(a, layout)?;
-    let agent = if cfg.agent.kind == AgentKind::WideNarrow {
-        match build_agent(&cfg.agent, layout, a.task, world_graph.as_deref(), a.seed) {
-            Ok(agent) => Some(agent),
+    let inputs = if cfg.agent.kind == AgentKind::WideNarrow {
+        match load_inputs(&cfg.agent, layout, a.task, world_graph.as_deref(), a.seed) {
+            Ok(inputs) => inputs,
             Err(e) if world_graph.is_some() => return Err(e),
-            Err(_) => {
-                if cfg.agent.window == 0 {
-                    eprintln!(
-                        "train: window = {} stays as given: the auto side is resolved from the \
-                     world graph's wide-goal candidates; give --world-graph to print it",
-                        cfg.agent.window
-                    );
-                }
-                None
-            }
+            Err(_) => None,
         }
     } else {
         None
     };
-    cfg.agent = resolve_auto(&cfg.agent, auto_values(&cfg.agent, agent.as_ref(), layout));
+    let candidates = known_candidates(&cfg.agent, layout, inputs.as_ref());
+    if cfg.agent.kind == AgentKind::WideNarrow && candidates.is_none() && cfg.agent.window == 0 {
+        eprintln!(
+            "train: window = 0 stays as given: the auto side is resolved from the world graph's \
+             wide-goal candidates; give --world-graph to print it"
+        );
+    }
+    cfg.agent = resolve_auto(
+        &cfg.agent,
+        auto_values(&cfg.agent, layout, candidates.as_deref()),
+    );
     print!("{}", toml::to_string(&cfg)?);
     Ok(())
 }

@@ -17,7 +17,7 @@ use planner::WorldGraph;
 use sim::{Layout, ReplayRng};
 use tch::{Tensor, nn};
 
-use super::config::{AgentConfig, AgentKind, Candidates};
+use super::config::{AgentConfig, AgentKind};
 use super::controller::Controller;
 use super::feudal::{Decision, GoalBias, Manager, ManagerHead, OwnTrunk};
 use super::manager_kernels::{OwnDecision, OwnManager};
@@ -160,26 +160,7 @@ impl ManagerSide {
         graph: Option<&WorldGraph>,
     ) -> ManagerSide {
         let (width, height) = (layout.width, layout.height);
-        let candidates: Vec<u32> = match (cfg.kind, cfg.candidates) {
-            // V_all: every standable cell, and the cells
-            // `AgentConfig::extra_candidates` adds (the task's objects).
-            (AgentKind::WideNarrow, Candidates::All) => {
-                let mut v: Vec<u32> = planner::pivotal::v_all(layout)
-                    .iter()
-                    .map(|c| c.0)
-                    .collect();
-                for c in cfg.extra_candidates(layout) {
-                    if !v.contains(&c) {
-                        v.push(c);
-                    }
-                }
-                v
-            }
-            (AgentKind::WideNarrow, _) => graph
-                .map(|g| g.nodes().iter().map(|c| c.0).collect())
-                .unwrap_or_default(),
-            _ => Vec::new(),
-        };
+        let candidates = wide_narrow::wide_goal_candidates(cfg, layout, graph);
         let window = (cfg.kind == AgentKind::WideNarrow).then(|| {
             let side = match cfg.window {
                 0 => wide_narrow::covering_side(cfg.window_side(width), &candidates, layout),

@@ -28,6 +28,7 @@ use tch::{Kind, Tensor};
 use crate::a2c::Categorical;
 use crate::a2c::input::OBJECT_CHANNELS;
 use crate::batch_env::ObsView;
+use crate::hrl::{AgentConfig, AgentKind, Candidates};
 
 /// Floats per window cell of the local input: object kinds + agent here.
 pub const WINDOW_CHANNELS: usize = OBJECT_CHANNELS + 1;
@@ -242,6 +243,38 @@ pub fn covering_side(min_side: usize, candidates: &[u32], layout: &sim::Layout) 
         .step_by(2)
         .find(|&side| coverage(side, candidates, layout).is_complete())
         .unwrap_or(widest)
+}
+
+/// The wide-goal candidates `V` of a WN Manager of `cfg` on `layout`
+/// (section 4.2): `V_all`, every standable cell and the cells
+/// [`AgentConfig::extra_candidates`] adds (the task's objects), or the
+/// nodes of the world graph `graph` (`V_p` or `V_rand`); none for FN and
+/// the flat A2C.
+pub fn wide_goal_candidates(
+    cfg: &AgentConfig,
+    layout: &sim::Layout,
+    graph: Option<&planner::WorldGraph>,
+) -> Vec<u32> {
+    match (cfg.kind, cfg.candidates) {
+        // V_all: every standable cell, and the cells
+        // `AgentConfig::extra_candidates` adds (the task's objects).
+        (AgentKind::WideNarrow, Candidates::All) => {
+            let mut v: Vec<u32> = planner::pivotal::v_all(layout)
+                .iter()
+                .map(|c| c.0)
+                .collect();
+            for c in cfg.extra_candidates(layout) {
+                if !v.contains(&c) {
+                    v.push(c);
+                }
+            }
+            v
+        }
+        (AgentKind::WideNarrow, _) => graph
+            .map(|g| g.nodes().iter().map(|c| c.0).collect())
+            .unwrap_or_default(),
+        _ => Vec::new(),
+    }
 }
 
 /// `π^ω` and `π^n`.

@@ -15,7 +15,8 @@ use sim::{Layout, Maze, Task};
 
 use crate::discovery::DiscoveryConfig;
 use crate::gcp::{GcpConfig, GoalConditionedPolicy};
-use crate::hrl::{AgentConfig, Candidates, HrlAgent, WorldGraphInputs};
+use crate::hrl::wide_narrow::wide_goal_candidates;
+use crate::hrl::{AgentConfig, AgentKind, Candidates, HrlAgent, WorldGraphInputs};
 
 /// The world graph's file in a discovery run.
 pub const GRAPH_FILE: &str = "graph.json";
@@ -281,7 +282,61 @@ pub fn world_graph_for(
     Ok(graph)
 }
 
-/// The agent of a run: configuration, layout, and the stage 1 inputs.
+/// What the agent of a run takes from stage 1 (section 4): `π_g` and,
+/// for WN over `V_rand` or `V_p`, the world graph over its candidates, from
+/// the discovery run `world_graph`; `None` for an agent that needs
+/// neither. An agent that needs a discovery run and has none is refused.
+pub fn load_inputs(
+    cfg: &AgentConfig,
+    layout: &Layout,
+    task: Task,
+    world_graph: Option<&Path>,
+    seed: u64,
+) -> anyhow::Result<Option<WorldGraphInputs>> {
+    let Some(dir) = world_graph else {
+        if cfg.needs_discovery(task) {
+            bail!(
+                "{} needs --world-graph DISCOVER_RUN (its V_p and π_g); run `worldgraph discover --maze ...` first",
+                cfg.name()
+            );
+        }
+        return Ok(None);
+    };
+    let mut gcp = load_gcp(dir, layout)?;
+    let graph = if cfg.needs_graph() {
+        Some(world_graph_for(
+            dir,
+            layout,
+            cfg.candidates,
+            &cfg.extra_candidates(layout),
+            seed,
+            &mut gcp,
+        )?)
+    } else {
+        None
+    };
+    Ok(Some(WorldGraphInputs {
+        graph,
+        gcp: Some(gcp),
+    }))
+}
+
+/// The wide-goal candidates of `cfg` on `layout` when they are known
+/// before the agent is built: `V_all` from the layout, `V_p` or `V_rand`
+/// from the world graph in `inputs`; `None` for FN and A2C, and for a WN
+/// over a graph not given.
+pub fn known_candidates(
+    cfg: &AgentConfig,
+    layout: &Layout,
+    inputs: Option<&WorldGraphInputs>,
+) -> Option<Vec<u32>> {
+    let graph = inputs.and_then(|i| i.graph.as_ref());
+    (cfg.kind == AgentKind::WideNarrow && (!cfg.needs_graph() || graph.is_some()))
+        .then(|| wide_goal_candidates(cfg, layout, graph))
+}
+
+/// The agent of a run: configuration, layout, and the stage 1 inputs
+/// ([`load_inputs`]).
 pub fn build_agent(
     cfg: &AgentConfig,
     layout: &Layout,
@@ -289,32 +344,6 @@ pub fn build_agent(
     world_graph: Option<&Path>,
     seed: u64,
 ) -> anyhow::Result<HrlAgent> {
-    let needs_run = cfg.needs_discovery(task);
-    let inputs = match world_graph {
-        Some(dir) => {
-            let mut gcp = load_gcp(dir, layout)?;
-            let graph = if cfg.needs_graph() {
-                Some(world_graph_for(
-                    dir,
-                    layout,
-                    cfg.candidates,
-                    &cfg.extra_candidates(layout),
-                    seed,
-                    &mut gcp,
-                )?)
-            } else {
-                None
-            };
-            Some(WorldGraphInputs {
-                graph,
-                gcp: Some(gcp),
-            })
-        }
-        None if needs_run => bail!(
-            "{} needs --world-graph DISCOVER_RUN (its V_p and π_g); run `worldgraph discover --maze ...` first",
-            cfg.name()
-        ),
-        None => None,
-    };
+    let inputs = load_inputs(cfg, layout, task, world_graph, seed)?;
     Ok(HrlAgent::new(cfg, layout, task, inputs, seed)?)
 }

@@ -8,7 +8,7 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use sim::Task;
 
-use crate::hrl::{AgentConfig, AgentKind, HrlAgent};
+use crate::hrl::{AgentConfig, AgentKind};
 use sim::Layout;
 
 /// The most seeds one evaluation steps side by side (`evaluate --seeds`,
@@ -164,13 +164,17 @@ pub fn trained_env_steps(cfg: &TrainConfig) -> u64 {
     cfg.env_steps.div_ceil(per_segment) * per_segment
 }
 
-/// What `0 = auto` stands for in `cfg` on this run: the Manager horizon
-/// `c` (FN and WN; A2C has no Manager) and the narrow window's side (WN,
-/// from `agent`'s wide-goal candidates, so `None` without an agent).
+/// What `0 = auto` stands for in `cfg` on this run, from the maze and the
+/// world graph alone (before any agent is built): the Manager horizon `c`
+/// (FN and WN; A2C has no Manager) and the narrow window's side (WN: the
+/// narrowest odd side from the default up whose windows around the
+/// wide-goal `candidates` cover every free cell,
+/// [`crate::hrl::wide_narrow::covering_side`]; `None` when the candidates
+/// are not known).
 pub fn auto_values(
     cfg: &AgentConfig,
-    agent: Option<&HrlAgent>,
     layout: &Layout,
+    candidates: Option<&[u32]>,
 ) -> (Option<usize>, Option<usize>) {
     let horizon = (cfg.kind != AgentKind::A2c).then(|| {
         AgentConfig {
@@ -179,24 +183,15 @@ pub fn auto_values(
         }
         .horizon() as usize
     });
-    let window = agent
+    let window = candidates
         .filter(|_| cfg.kind == AgentKind::WideNarrow)
-        .and_then(|agent| {
-            if cfg.window == 0 {
-                // The side the agent resolved and uses.
-                agent.window_coverage().map(|c| c.side)
-            } else {
-                let base = AgentConfig {
-                    window: 0,
-                    ..cfg.clone()
-                }
-                .window_side(layout.width);
-                Some(crate::hrl::wide_narrow::covering_side(
-                    base,
-                    agent.candidates(),
-                    layout,
-                ))
+        .map(|candidates| {
+            let base = AgentConfig {
+                window: 0,
+                ..cfg.clone()
             }
+            .window_side(layout.width);
+            crate::hrl::wide_narrow::covering_side(base, candidates, layout)
         });
     (horizon, window)
 }
@@ -225,7 +220,7 @@ pub fn resolve_auto(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hrl::Candidates;
+    use crate::hrl::{Candidates, HrlAgent};
     use sim::{Maze, Task};
 
     /// Issue 21, item 8: the budget a run trains is its rounding to whole
@@ -241,10 +236,11 @@ mod tests {
         }
     }
 
-    /// Issue 21: `0 = auto` resolves to the values the agent uses; a
-    /// setting the agent lacks stays 0, and an explicit value stays.
+    /// Issue 21: `0 = auto` resolves, before any agent is built (issue 50),
+    /// to the values an agent given `0` uses; a setting the agent lacks
+    /// stays 0, and an explicit value stays.
     #[test]
-    fn auto_settings_resolve_to_what_the_agent_uses() {
+    fn auto_settings_resolve_before_the_agent_to_what_it_uses() {
         let layout = Maze::Small.layout(false);
         let wn = AgentConfig {
             kind: AgentKind::WideNarrow,
@@ -253,8 +249,9 @@ mod tests {
             rollout_len: 21,
             ..AgentConfig::default()
         };
+        let candidates = crate::run::artefact::known_candidates(&wn, &layout, None);
+        let auto = auto_values(&wn, &layout, candidates.as_deref());
         let agent = HrlAgent::new(&wn, &layout, Task::MultiGoal, None, 0).unwrap();
-        let auto = auto_values(&wn, Some(&agent), &layout);
         let side = agent.window_coverage().unwrap().side;
         assert_eq!(auto, (Some(7), Some(side)));
         let r = resolve_auto(&wn, auto);
@@ -272,13 +269,13 @@ mod tests {
             kind: AgentKind::A2c,
             ..wn.clone()
         };
-        let r = resolve_auto(&a2c, auto_values(&a2c, None, &layout));
+        let r = resolve_auto(&a2c, auto_values(&a2c, &layout, None));
         assert_eq!((r.horizon, r.window), (0, 0), "A2C has neither");
         let fnet = AgentConfig {
             kind: AgentKind::Feudal,
             ..wn
         };
-        let r = resolve_auto(&fnet, auto_values(&fnet, None, &layout));
+        let r = resolve_auto(&fnet, auto_values(&fnet, &layout, None));
         assert_eq!((r.horizon, r.window), (7, 0), "FN has a horizon, no window");
     }
 

@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use sim::atomic_file::write_atomic;
 use sim::{EnvConfig, Layout, Task};
 
-use super::artefact::build_agent;
+use super::artefact::{known_candidates, load_inputs};
 use super::config::{RunIdentity, TrainConfig, auto_values, resolve_auto, trained_env_steps};
 use super::dir::{RunKind, check, lock, record_invocation};
 use super::protocol::{
@@ -76,16 +76,26 @@ impl TrainRun {
     pub fn open(mut spec: TrainSpec) -> anyhow::Result<TrainRun> {
         let dir = spec.dir.clone();
         check("--run", &dir, RunKind::Train, &spec.own_files)?;
-        let mut agent = build_agent(
+        // The settings are resolved once, from the maze and the world
+        // graph, before the agent is built: the run's files, its identity
+        // and the agent all hold what `0 = auto` resolved to.
+        let inputs = load_inputs(
             &spec.config.agent,
             &spec.layout,
             spec.task,
             spec.world_graph.as_deref(),
             spec.seed,
         )?;
-        // The run's files and identity hold what `0 = auto` resolved to.
-        let auto = auto_values(&spec.config.agent, Some(&agent), &spec.layout);
+        let candidates = known_candidates(&spec.config.agent, &spec.layout, inputs.as_ref());
+        let auto = auto_values(&spec.config.agent, &spec.layout, candidates.as_deref());
         spec.config.agent = resolve_auto(&spec.config.agent, auto);
+        let mut agent = HrlAgent::new(
+            &spec.config.agent,
+            &spec.layout,
+            spec.task,
+            inputs,
+            spec.seed,
+        )?;
         let config = &spec.config;
         let identity = RunIdentity {
             maze: spec.layout.name.clone(),
