@@ -536,6 +536,25 @@ mod tests {
     use crate::hrl::{AgentConfig, AgentKind};
     use sim::Maze;
 
+    /// A resumed run carries on from the rows it read back from
+    /// `state.json`, so each float must read back as the same bits: these
+    /// are a small-maze WN run's segment statistics that read back one ulp
+    /// off before serde_json parsed floats exactly (`float_roundtrip`), so
+    /// that a resumed run's `state.json` differed from an uninterrupted
+    /// one's in the last digit.
+    #[test]
+    fn the_metrics_rows_read_back_from_state_json_bit_for_bit() {
+        for x in [
+            0.24993813412521654_f64,
+            0.021377228659444622,
+            0.011179948622538221,
+        ] {
+            let text = serde_json::to_string(&x).unwrap();
+            let back: f64 = serde_json::from_str(&text).unwrap();
+            assert_eq!(back.to_bits(), x.to_bits(), "{text} read back as {back:?}");
+        }
+    }
+
     /// Issue 21: a real test episode records the grid it started on and
     /// the grid it ended on, and they agree with the simulator's return
     /// (MultiGoal: +1 a ball, +1 at the exit, −0.01 a step).
