@@ -665,3 +665,51 @@ fn resolved_settings_are_written_and_a_run_resumes_under_auto_or_explicit_values
         );
     }
 }
+
+/// Issue 48: the episode step limit is a setting (`max_episode_steps`; the
+/// paper gives none). `0 = auto` resolves to twice the maze's free cells
+/// and is written so; another value cuts every episode there, in training
+/// and when the run is scored again by `evaluate`.
+#[test]
+fn the_episode_step_limit_is_a_setting_written_resolved_and_kept_by_evaluate() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path());
+    let free = Maze::Small.layout(false).free_cells().len() as i64;
+    let train = |name: &str, extra: &[&str]| {
+        let run = dir.path().join(name);
+        let mut args = vec![
+            "train",
+            "--maze",
+            "small",
+            "--task",
+            "multigoal",
+            "--agent",
+            "a2c",
+            "--config",
+            &cfg,
+            "--env-steps",
+            "800",
+        ];
+        let r = run.display().to_string();
+        args.extend(["--run", &r]);
+        args.extend(extra);
+        ok(&worldgraph(&args));
+        let written: toml::Table = toml::from_str(&read(&run.join("config.toml"))).unwrap();
+        let limit = written["max_episode_steps"].as_integer().unwrap();
+        let eval = ok(&worldgraph(&["evaluate", &r, "--seeds", "0..20", "--json"]));
+        let v: serde_json::Value = serde_json::from_str(&eval).unwrap();
+        (limit, v["episodes"]["mean_length"].as_f64().unwrap())
+    };
+    let (auto, auto_len) = train("auto", &[]);
+    assert_eq!(auto, 2 * free, "twice the free cells");
+    let (cut, cut_len) = train("cut", &["--set", "max_episode_steps=12"]);
+    assert_eq!(cut, 12);
+    assert!(
+        cut_len <= 12.0,
+        "episodes of {cut_len} steps under a limit of 12"
+    );
+    assert!(
+        auto_len > 12.0,
+        "an untrained A2C exits within 12 steps: {auto_len}"
+    );
+}

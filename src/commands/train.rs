@@ -169,12 +169,13 @@ fn agent_config(a: &TrainArgs, base: &AgentConfig) -> AgentConfig {
     cfg
 }
 
-/// A sim process stepping `envs` environments seeded by `seed`, and the
-/// shared-memory client of its batch.
+/// A sim process stepping `envs` environments seeded by `seed` with the
+/// run's episode step limit, and the shared-memory client of its batch.
 fn pipeline_env(
     a: &TrainArgs,
     envs: usize,
     seed: u64,
+    max_steps: u32,
     dir: &Path,
 ) -> anyhow::Result<(
     Box<dyn BatchEnvironment>,
@@ -186,7 +187,7 @@ fn pipeline_env(
         layout: a.layout.clone(),
         task: a.task,
         seed,
-        max_steps: None,
+        max_steps: Some(max_steps),
         balls: None,
     };
     let (env, p) = crate::pipeline::spawn_sim_env(&w, envs, &run_name, dir)?;
@@ -442,7 +443,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
 fn train_segments(a: &TrainArgs, run: &mut TrainRun) -> anyhow::Result<()> {
     let (envs, seed) = (run.config().agent.envs, run.segment_seed());
     let (mut env, pipeline) = if a.pipeline {
-        let (env, p) = pipeline_env(a, envs, seed, run.dir())?;
+        let (env, p) = pipeline_env(a, envs, seed, run.env_cfg().max_steps, run.dir())?;
         (env, Some(p))
     } else {
         let env: Box<dyn BatchEnvironment> = Box::new(InProcess::new(

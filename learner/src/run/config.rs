@@ -27,6 +27,11 @@ pub struct TrainConfig {
     pub validation_seeds: usize,
     /// Test seeds.
     pub test_seeds: usize,
+    /// Step limit of an episode, in training, validation and test (an
+    /// episode that reaches it is cut, its step penalties paid). The paper
+    /// does not give its limit; `0 = auto`: twice the maze's free cells
+    /// ([`sim::EnvConfig::for_task`]), written resolved to `config.toml`.
+    pub max_episode_steps: u32,
     /// The agent.
     pub agent: AgentConfig,
 }
@@ -38,6 +43,7 @@ impl Default for TrainConfig {
             eval_every: 50_000,
             validation_seeds: 10,
             test_seeds: 100,
+            max_episode_steps: 0,
             agent: AgentConfig::default(),
         }
     }
