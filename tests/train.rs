@@ -702,6 +702,12 @@ fn the_episode_step_limit_is_a_setting_written_resolved_and_kept_by_evaluate() {
     };
     let (auto, auto_len) = train("auto", &[]);
     assert_eq!(auto, 2 * free, "twice the free cells");
+    let printed = printed_config(&["--agent", "a2c", "--config", &cfg]);
+    assert_eq!(
+        printed["max_episode_steps"].as_integer(),
+        Some(auto),
+        "--print-config resolves it"
+    );
     let (cut, cut_len) = train("cut", &["--set", "max_episode_steps=12"]);
     assert_eq!(cut, 12);
     assert!(

@@ -267,7 +267,15 @@ fn world_graph_dir(a: &TrainArgs, layout: &Layout) -> anyhow::Result<Option<Path
 /// them, `0 = auto` resolved. The window of WN over `V_rand` or `V_p`
 /// needs the world graph: without `--world-graph` it stays 0, said on
 /// stderr.
-fn print_config(a: &TrainArgs, mut cfg: TrainConfig, layout: &Layout) -> anyhow::Result<()> {
+fn print_config(
+    a: &TrainArgs,
+    mut cfg: TrainConfig,
+    layout: &Layout,
+    auto_episode_steps: u32,
+) -> anyhow::Result<()> {
+    if cfg.max_episode_steps == 0 {
+        cfg.max_episode_steps = auto_episode_steps;
+    }
     let world_graph = world_graph_dir(a, layout)?;
     let inputs = if cfg.agent.kind == AgentKind::WideNarrow {
         match load_inputs(&cfg.agent, layout, a.task, world_graph.as_deref(), a.seed) {
@@ -383,7 +391,7 @@ pub fn run(a: TrainArgs) -> anyhow::Result<std::process::ExitCode> {
     check_budget(&cfg, a.config.as_deref())?;
     let (layout, env_cfg) = train_world(a.maze, a.layout.as_deref(), a.task)?;
     if a.print_config {
-        print_config(&a, cfg, &layout)?;
+        print_config(&a, cfg, &layout, env_cfg.max_steps)?;
         return Ok(std::process::ExitCode::SUCCESS);
     }
     let dir = run_dir(&a, &layout, &cfg.agent);
