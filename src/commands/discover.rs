@@ -201,7 +201,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let mut transport = Transport::open(&a, &w, &layout, env_cfg, seed, run.dir())?;
     discover_rounds(&mut run, transport.env.as_mut())?;
     let gcp_success = run
-        .discovery()
+        .discovery_mut()
         .evaluate_gcp(transport.env.as_mut(), 10, 200)?;
     let transport_name = transport.name;
     transport.close()?;
@@ -212,14 +212,14 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         // Edges walked by the planner process, then each path shortened
         // by π_g where it reaches the next node faster.
         let mut g = build_graph_in_planner(&a, &w, run.dir(), &pivotal_file)?;
-        let stats = run.discovery().refine_graph(&mut g)?;
+        let stats = run.discovery_mut().refine_graph(&mut g)?;
         (g, stats)
     } else {
-        run.discovery().build_graph(Task::MultiGoal)?
+        run.discovery_mut().build_graph(Task::MultiGoal)?
     };
     run.save_world_graph(&graph)?;
     let summary = summarise(
-        &mut run,
+        &run,
         &graph,
         &refinement,
         gcp_success,
@@ -231,7 +231,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
         &dir.join("discovery.json"),
         &serde_json::to_vec_pretty(&summary)?,
     )?;
-    save_pictures(&mut run, &graph, seed)?;
+    save_pictures(&run, &graph, seed)?;
     if a.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {
@@ -340,14 +340,14 @@ fn discover_rounds(run: &mut DiscoveryRun, env: &mut dyn BatchEnvironment) -> an
 /// The run's summary (`discovery.json`): the loop's figures, the world
 /// graph's, and `V_p` against random cells on the maze's structure.
 fn summarise(
-    run: &mut DiscoveryRun,
+    run: &DiscoveryRun,
     graph: &planner::WorldGraph,
     refinement: &RefinementStats,
     gcp_success: f64,
     transport: &str,
     pivotal_cells: Vec<[u16; 2]>,
 ) -> anyhow::Result<DiscoverySummary> {
-    let layout = run.layout().clone();
+    let layout = run.layout();
     let disc = run.discovery();
     let seed = disc.config().seed;
     let history = disc.history();
@@ -356,7 +356,7 @@ fn summarise(
     let reconstruction_accuracy = history.last().map_or(0.0, |h| h.reconstruction_accuracy);
     let pivotal = disc.pivotal_states();
     let structure = StructureReport::measure(
-        &layout,
+        layout,
         pivotal,
         graph,
         &disc.graph_config(Task::MultiGoal),
@@ -413,11 +413,7 @@ fn connected_pairs(graph: &planner::WorldGraph) -> f64 {
 }
 
 /// The pivotal states on the maze, the world graph, and the loop's curves.
-fn save_pictures(
-    run: &mut DiscoveryRun,
-    graph: &planner::WorldGraph,
-    seed: u64,
-) -> anyhow::Result<()> {
+fn save_pictures(run: &DiscoveryRun, graph: &planner::WorldGraph, seed: u64) -> anyhow::Result<()> {
     let dir = run.dir().to_path_buf();
     let layout = run.layout().clone();
     let disc = run.discovery();

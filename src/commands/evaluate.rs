@@ -181,9 +181,7 @@ impl ScoredRun {
         let (layout, mut env_cfg) = run_world(run, &id.maze, task)?;
         // The run's episode step limit (0 in a run recorded before it was a
         // setting: the environment's own).
-        if id.config.max_episode_steps != 0 {
-            env_cfg.max_steps = id.config.max_episode_steps;
-        }
+        env_cfg.max_steps = id.config.episode_limit(env_cfg.max_steps);
         let mut agent = build_agent(
             &id.config.agent,
             &layout,

@@ -273,9 +273,7 @@ fn print_config(
     layout: &Layout,
     auto_episode_steps: u32,
 ) -> anyhow::Result<()> {
-    if cfg.max_episode_steps == 0 {
-        cfg.max_episode_steps = auto_episode_steps;
-    }
+    cfg.max_episode_steps = cfg.episode_limit(auto_episode_steps);
     let world_graph = world_graph_dir(a, layout)?;
     let inputs = if cfg.agent.kind == AgentKind::WideNarrow {
         match load_inputs(&cfg.agent, layout, a.task, world_graph.as_deref(), a.seed) {

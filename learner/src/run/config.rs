@@ -162,6 +162,18 @@ pub fn read_config(path: &Path) -> anyhow::Result<TrainConfig> {
         .with_context(|| format!("{} is not a valid training config", path.display()))
 }
 
+impl TrainConfig {
+    /// The episode step limit of a run of these settings on an environment
+    /// whose own limit is `auto` (`0 = auto`).
+    pub fn episode_limit(&self, auto: u32) -> u32 {
+        if self.max_episode_steps == 0 {
+            auto
+        } else {
+            self.max_episode_steps
+        }
+    }
+}
+
 /// The env steps a run of `cfg` trains: its budget rounded up to whole
 /// segments of whole iterations.
 pub fn trained_env_steps(cfg: &TrainConfig) -> u64 {

@@ -100,8 +100,14 @@ impl DiscoveryRun {
         self.resumed.then(|| self.discovery.rounds_done())
     }
 
-    /// The loop: its settings, curves, pivotal states and `π_g`.
-    pub fn discovery(&mut self) -> &mut Discovery {
+    /// The loop: its settings, curves and pivotal states.
+    pub fn discovery(&self) -> &Discovery {
+        &self.discovery
+    }
+
+    /// The loop, to act on it (evaluate or refine with `π_g`, build the
+    /// world graph).
+    pub fn discovery_mut(&mut self) -> &mut Discovery {
         &mut self.discovery
     }
 

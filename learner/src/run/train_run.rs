@@ -79,9 +79,7 @@ impl TrainRun {
         // The episode step limit: `0 = auto` is the environment's own
         // (twice the free cells); another value replaces it everywhere.
         let auto_limit = spec.env_cfg.max_steps;
-        if spec.config.max_episode_steps == 0 {
-            spec.config.max_episode_steps = auto_limit;
-        }
+        spec.config.max_episode_steps = spec.config.episode_limit(auto_limit);
         spec.env_cfg.max_steps = spec.config.max_episode_steps;
         // The settings are resolved once, from the maze and the world
         // graph, before the agent is built: the run's files, its identity
@@ -121,9 +119,7 @@ impl TrainRun {
             // A run recorded before its identity held resolved values says
             // 0 = auto: resolved for this maze and world graph, as this one.
             old.identity.config.agent = resolve_auto(&old.identity.config.agent, auto);
-            if old.identity.config.max_episode_steps == 0 {
-                old.identity.config.max_episode_steps = auto_limit;
-            }
+            old.identity.config.max_episode_steps = old.identity.config.episode_limit(auto_limit);
             if old.identity != identity {
                 bail!(
                     "{} holds another run ({}); use another --run",
