@@ -21,6 +21,7 @@ use std::io::{Cursor, Write};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+use tch::Tensor;
 use tch::nn::VarStore;
 
 use crate::LearnerError;
@@ -56,6 +57,33 @@ pub fn var_store_bytes(vs: &VarStore) -> Result<Vec<u8>, LearnerError> {
             .map_err(|_| error("(in memory)", "checkpoint buffer poisoned"))?,
     );
     Ok(bytes)
+}
+
+/// Named tensors (an agent's weights and optimiser moments) as the bytes
+/// of a tensor file.
+pub fn named_tensors_bytes(named: &[(String, Tensor)]) -> Result<Vec<u8>, LearnerError> {
+    let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), t)).collect();
+    let mut buf = Vec::new();
+    Tensor::save_multi_to_stream(&refs, &mut buf)?;
+    Ok(buf)
+}
+
+/// The named tensors of [`named_tensors_bytes`]'s `bytes`, read from
+/// `source` (named in the error).
+pub fn named_tensors_of(
+    bytes: &[u8],
+    source: &Path,
+) -> Result<Vec<(String, Tensor)>, LearnerError> {
+    Tensor::load_multi_from_stream(Cursor::new(bytes))
+        .map_err(|e| checkpoint_error(source, e.to_string()))
+}
+
+/// A checkpoint error naming `source` and the cause `message`.
+pub fn checkpoint_error(source: &Path, message: String) -> LearnerError {
+    LearnerError::Checkpoint {
+        path: source.display().to_string(),
+        message,
+    }
 }
 
 /// Loads weights written by [`var_store_bytes`] into `vs` (same variable

@@ -7,7 +7,7 @@
 
 use learner::batch_env::InProcess;
 use learner::gcp::{GcpConfig, GoalConditionedPolicy};
-use learner::hrl::{AgentConfig, AgentKind, Candidates, HrlAgent, WorldGraphInputs};
+use learner::hrl::{Agent, AgentConfig, AgentKind, Candidates, WorldGraphInputs};
 use planner::{CandidateSet, PlannerConfig, WorldGraph};
 use sim::{AutoReset, BallSpawn, BatchEnv, EnvConfig, Layout, Task};
 
@@ -30,7 +30,7 @@ fn world() -> (Layout, EnvConfig) {
     (layout, env)
 }
 
-fn test_score(agent: &mut HrlAgent, layout: &Layout, env: EnvConfig) -> f64 {
+fn test_score(agent: &mut Agent, layout: &Layout, env: EnvConfig) -> f64 {
     let batch = BatchEnv::with_first_index(layout.clone(), env, 0, 64, 77, 1).expect("batch");
     agent
         .evaluate(&mut InProcess::from_batch(batch), 5, None)
@@ -41,7 +41,7 @@ fn test_score(agent: &mut HrlAgent, layout: &Layout, env: EnvConfig) -> f64 {
 /// Trains `iterations` updates; returns the share of Manager intervals in
 /// which the Worker reached its goal, over the first and the last 50.
 fn train(
-    agent: &mut HrlAgent,
+    agent: &mut Agent,
     layout: &Layout,
     env: EnvConfig,
     seed: u64,
@@ -79,7 +79,7 @@ fn a2c_learns_the_two_rooms() {
     tch::set_num_threads(1);
     let (layout, env) = world();
     let mut agent =
-        HrlAgent::new(&config(AgentKind::A2c), &layout, Task::MultiGoal, None, 2).expect("agent");
+        Agent::new(&config(AgentKind::A2c), &layout, Task::MultiGoal, None, 2).expect("agent");
     let before = test_score(&mut agent, &layout, env);
     let _ = train(&mut agent, &layout, env, 2, 400);
     let after = test_score(&mut agent, &layout, env);
@@ -135,7 +135,7 @@ fn the_wide_then_narrow_worker_learns_to_reach_the_managers_goals() {
         graph: Some(graph),
         gcp: Some(gcp),
     };
-    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 3).expect("agent");
+    let mut agent = Agent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 3).expect("agent");
     assert!(agent.init_report().is_some_and(|r| !r.copied.is_empty()));
     let before = test_score(&mut agent, &layout, env);
     let (first, last) = train(&mut agent, &layout, env, 3, 300);

@@ -17,7 +17,7 @@ use clap::{Args, ValueEnum};
 use learner::a2c::PhaseTimes;
 use learner::a2c::rollout::GradPath;
 use learner::batch_env::{BatchEnvironment, InProcess};
-use learner::hrl::{AgentConfig, AgentKind, Candidates, HrlAgent, WorldGraphInputs};
+use learner::hrl::{Agent, AgentConfig, AgentKind, Candidates, WorldGraphInputs};
 use serde::Serialize;
 use tch::{Device, Kind, Tensor};
 
@@ -197,7 +197,7 @@ pub struct PytorchFigures {
 /// A learner the bench can train.
 enum Learner {
     Gcp(Box<learner::gcp::GoalConditionedPolicy>),
-    Hrl(Box<HrlAgent>),
+    Stage2(Box<Agent>),
 }
 
 impl Learner {
@@ -209,20 +209,20 @@ impl Learner {
                 g.train_iteration(env, None)?;
                 0
             }
-            Learner::Hrl(a) => a.train_iteration(env)?.decisions as u64,
+            Learner::Stage2(a) => a.train_iteration(env)?.decisions as u64,
         })
     }
     /// The narrow window's side (WN).
     fn window_side(&self) -> Option<usize> {
         match self {
-            Learner::Hrl(a) => a.window_coverage().map(|c| c.side),
+            Learner::Stage2(a) => a.window_coverage().map(|c| c.side),
             Learner::Gcp(_) => None,
         }
     }
     fn take_times(&mut self) -> PhaseTimes {
         match self {
             Learner::Gcp(g) => g.take_times(),
-            Learner::Hrl(a) => a.take_times(),
+            Learner::Stage2(a) => a.take_times(),
         }
     }
     fn flops(&self) -> f64 {
@@ -231,7 +231,7 @@ impl Learner {
                 let net = g.network();
                 learner::a2c::net::flops_per_env_step(net.trunk(), net.config().num_actions)
             }
-            Learner::Hrl(a) => a.flops_per_env_step(),
+            Learner::Stage2(a) => a.flops_per_env_step(),
         }
     }
 }
@@ -284,9 +284,9 @@ fn build(
             } else {
                 None
             };
-            let mut agent = HrlAgent::new(&cfg, &layout, env_cfg.task, graph, a.world.seed)?;
+            let mut agent = Agent::new(&cfg, &layout, env_cfg.task, graph, a.world.seed)?;
             agent.set_grad_path(path);
-            Learner::Hrl(Box::new(agent))
+            Learner::Stage2(Box::new(agent))
         }
     };
     Ok((learner, env))

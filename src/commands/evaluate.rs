@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use learner::hrl::{EpisodeTrace, HrlAgent};
+use learner::hrl::{Agent, EpisodeTrace};
 use learner::run::artefact::build_agent;
 use learner::run::config::{MAX_EVAL_SEEDS, read_config, trained_env_steps};
 use learner::run::dir::{RunKind, describe, kind_of};
@@ -131,7 +131,7 @@ struct ScoredRun {
     task: Task,
     layout: Layout,
     env_cfg: EnvConfig,
-    agent: HrlAgent,
+    agent: Agent,
     /// The run's budget, when it has not trained it all.
     unfinished: Option<u64>,
 }

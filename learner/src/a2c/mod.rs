@@ -24,13 +24,16 @@
 //!   observations in one batched call before unrolling the LSTM over the
 //!   stored features (CleanRL's PPO-LSTM layout), gives the same gradients
 //!   and is kept for `worldgraph bench learner`;
-//! - [`a2c_loss`]: `L = L_π + c_V · L_V − c_H · H` over weighted entries.
+//! - [`a2c_loss`]: `L = L_π + c_V · L_V − c_H · H` over weighted entries;
+//! - [`learner`]: a network, its optimiser and its rollout, as the A2C
+//!   baseline and the Worker train them.
 
 pub mod encoder;
 pub mod gemm;
 mod grad_path;
 pub mod input;
 pub mod kernels;
+pub mod learner;
 pub mod lstm;
 pub mod net;
 pub mod optim;

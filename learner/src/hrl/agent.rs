@@ -1,8 +1,9 @@
 //! A stage 2 agent (Shang et al. 2019, section 4): its owners, how it is
 //! built, and its checkpoints.
 //!
-//! [`HrlAgent`] holds the Worker's side ([`WorkerSide`]: the baseline's
-//! network for A2C), the Manager's side for FN and WN ([`ManagerSide`],
+//! [`HrlAgent`] — a Feudal or Wide-then-Narrow hierarchy; the flat A2C
+//! baseline is [`super::A2cAgent`] — holds the Worker's side
+//! ([`WorkerSide`]), the Manager's side ([`ManagerSide`],
 //! sections 4.1–4.2), the world graph traversal with `π_g`
 //! ([`Traverser`], section 4.3) and the training controller
 //! ([`Controller`]). Building it initialises the weights from the seed,
@@ -14,7 +15,7 @@ use std::path::Path;
 
 use planner::WorldGraph;
 use sim::{Layout, Task, action};
-use tch::{Tensor, nn};
+use tch::Tensor;
 
 use super::config::{AgentConfig, AgentKind, WorldGraphInputs};
 use super::controller::{Controller, SavedController};
@@ -24,8 +25,10 @@ use super::traversal::Traverser;
 use super::wide_narrow;
 use super::worker::WorkerSide;
 use crate::a2c::PhaseTimes;
+use crate::a2c::learner::{load_variables, moments_of, named_variables};
 use crate::a2c::rollout::GradPath;
 use crate::batch_env::BatchEnvironment;
+use crate::checkpoint::{checkpoint_error, named_tensors_bytes, named_tensors_of};
 use crate::error::{ConfigError, LearnerError};
 
 /// A stage 2 agent (module docs).
@@ -38,10 +41,10 @@ pub struct HrlAgent {
     /// The environment action of each Worker policy output
     /// ([`AgentConfig::worker_actions`]).
     pub(super) actions: &'static [u8],
-    /// The Worker (the baseline for A2C).
+    /// The Worker.
     pub(super) worker: WorkerSide,
-    /// The Manager (FN, WN).
-    pub(super) manager: Option<ManagerSide>,
+    /// The Manager.
+    pub(super) manager: ManagerSide,
     /// World graph traversal and `π_g`.
     pub(super) traverser: Traverser,
     /// The training controller.
@@ -61,7 +64,7 @@ impl std::fmt::Debug for HrlAgent {
 }
 
 /// Salts of the agent's seeds.
-const SEGMENT_SALT: u64 = 0x5E6_0000;
+pub(super) const SEGMENT_SALT: u64 = 0x5E6_0000;
 pub(super) const EVAL_SALT: u64 = 0xE7A1_0000;
 
 impl HrlAgent {
@@ -90,19 +93,24 @@ impl HrlAgent {
         if cfg.init_from_gcp && inputs.gcp.is_none() {
             return Err(ConfigError::new("init_from_gcp", "needs π_g from a discovery run").into());
         }
-        let hierarchical = cfg.kind != AgentKind::A2c;
+        if cfg.kind == AgentKind::A2c {
+            return Err(ConfigError::new(
+                "kind",
+                "the A2C baseline is a flat agent (A2cAgent), not a hierarchy",
+            )
+            .into());
+        }
         let (worker, manager) = crate::seeding::init_seeded(seed, || {
             let worker = WorkerSide::new(cfg, width, height, cfg.worker_actions(task).len());
-            let manager =
-                hierarchical.then(|| ManagerSide::new(cfg, layout, inputs.graph.as_ref()));
+            let manager = ManagerSide::new(cfg, layout, inputs.graph.as_ref());
             (worker, manager)
         });
         let init_report = match &inputs.gcp {
             Some(gcp) if cfg.init_from_gcp => Some(init::from_pi_g(
                 gcp,
                 cfg,
-                &worker.vs,
-                manager.as_ref().map(|m| &m.vs),
+                &worker.learner.vs,
+                Some(&manager.vs),
             )?),
             _ => None,
         };
@@ -110,8 +118,8 @@ impl HrlAgent {
         let ctl = Controller::new(
             cfg.envs,
             seed,
-            &worker.net,
-            manager.as_ref().map(|m| &m.net),
+            &worker.learner.net,
+            Some(&manager.net),
             traverser.pi_g(),
         );
         Ok(HrlAgent {
@@ -142,13 +150,13 @@ impl HrlAgent {
 
     /// The wide-goal candidates `V` (WN).
     pub fn candidates(&self) -> &[u32] {
-        self.manager.as_ref().map_or(&[], |m| &m.candidates)
+        &self.manager.candidates
     }
 
     /// Which free cells can be narrow goals: the coverage of the windows
     /// around `V` (WN).
     pub fn window_coverage(&self) -> Option<wide_narrow::Coverage> {
-        let m = self.manager.as_ref()?;
+        let m = &self.manager;
         m.window.as_ref().map(|w| w.coverage(&m.candidates))
     }
 
@@ -157,14 +165,12 @@ impl HrlAgent {
         self.traverser.graph()
     }
 
-    /// Chooses the gradient path of the Worker's (or baseline's) update
+    /// Chooses the gradient path of the Worker's and the Manager's updates
     /// (`bench learner` measures [`GradPath::RustCore`] against the
     /// [`GradPath::Tch`] reference this way).
     pub fn set_grad_path(&mut self, path: GradPath) {
-        self.worker.set_grad_path(path, self.cfg.envs);
-        if let Some(m) = self.manager.as_mut() {
-            m.set_grad_path(path);
-        }
+        self.worker.learner.set_grad_path(path, self.cfg.envs);
+        self.manager.set_grad_path(path);
     }
 
     /// A controller of `n` environments at the start of their episodes,
@@ -173,8 +179,8 @@ impl HrlAgent {
         Controller::new(
             n,
             seed,
-            &self.worker.net,
-            self.manager.as_ref().map(|m| &m.net),
+            &self.worker.learner.net,
+            Some(&self.manager.net),
             self.traverser.pi_g(),
         )
     }
@@ -220,74 +226,43 @@ impl HrlAgent {
 
     /// The batch's size, which must be the one the agent trains on.
     pub(super) fn check_batch(&self, env: &dyn BatchEnvironment) -> Result<usize, LearnerError> {
-        let n = env.num_envs();
-        if n != self.cfg.envs {
-            return Err(ConfigError::new(
-                "envs",
-                format!(
-                    "the agent was built for {} environments, the batch has {n}",
-                    self.cfg.envs
-                ),
-            )
-            .into());
-        }
-        Ok(n)
+        check_batch(self.cfg.envs, env)
     }
 
     /// Where training time went since the last call.
     pub fn take_times(&mut self) -> PhaseTimes {
         let mut t = std::mem::take(&mut self.times);
-        t.add(&std::mem::take(&mut self.worker.rollout.times));
+        t.add(&std::mem::take(&mut self.worker.learner.rollout.times));
         t
     }
 
-    /// Model FLOPs per env-step of the Worker's (baseline's) update path,
+    /// Model FLOPs per env-step of the Worker's update path,
     /// plus the Manager's forward and backward once per decision (about one
     /// per `c / 2` steps).
     pub fn flops_per_env_step(&self) -> f64 {
-        let worker =
-            crate::a2c::net::flops_per_env_step(self.worker.net.trunk(), self.actions.len() as i64);
-        match &self.manager {
-            Some(m) => worker + m.flops_per_decision() / (self.horizon as f64 / 2.0).max(1.0),
-            None => worker,
-        }
+        let worker = crate::a2c::net::flops_per_env_step(
+            self.worker.learner.net.trunk(),
+            self.actions.len() as i64,
+        );
+        worker + self.manager.flops_per_decision() / (self.horizon as f64 / 2.0).max(1.0)
     }
 
     /// Every tensor of the agent's state: the networks' weights and the
     /// optimisers' moments (`worker/...`, `manager/...`, `adam-worker/...`).
     fn named_tensors(&self) -> Vec<(String, Tensor)> {
-        let mut out: Vec<(String, Tensor)> = Vec::new();
-        let mut add = |prefix: &str, vs: &nn::VarStore| {
-            let mut v: Vec<(String, Tensor)> = vs
-                .variables()
-                .into_iter()
-                .map(|(k, t)| (format!("{prefix}/{k}"), t))
-                .collect();
-            v.sort_by(|a, b| a.0.cmp(&b.0));
-            out.extend(v);
-        };
-        add("worker", &self.worker.vs);
-        if let Some(m) = &self.manager {
-            add("manager", &m.vs);
-        }
+        let mut out = self.worker.learner.weights("worker");
+        out.extend(named_variables("manager", &self.manager.vs));
         if let Some(vs) = self.traverser.fine_tuned() {
-            add("pi_g", vs);
+            out.extend(named_variables("pi_g", vs));
         }
+        out.extend(self.worker.learner.moments("worker"));
         out.extend(
-            self.worker
+            self.manager
                 .opt
                 .state()
                 .into_iter()
-                .map(|(k, t)| (format!("worker-{k}"), t)),
+                .map(|(k, t)| (format!("manager-{k}"), t)),
         );
-        if let Some(m) = &self.manager {
-            out.extend(
-                m.opt
-                    .state()
-                    .into_iter()
-                    .map(|(k, t)| (format!("manager-{k}"), t)),
-            );
-        }
         if let Some(s) = self.traverser.steering() {
             out.extend(
                 s.optimiser()
@@ -302,61 +277,49 @@ impl HrlAgent {
     /// The weights and optimiser moments as bytes (a checkpoint's tensor
     /// file).
     pub fn to_bytes(&self) -> Result<Vec<u8>, LearnerError> {
-        let named = self.named_tensors();
-        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), t)).collect();
-        let mut buf = Vec::new();
-        Tensor::save_multi_to_stream(&refs, &mut buf)?;
-        Ok(buf)
+        named_tensors_bytes(&self.named_tensors())
     }
 
     /// Restores [`Self::to_bytes`] (of an agent of the same configuration);
     /// `source` names the input in errors.
     pub fn load_bytes(&mut self, bytes: &[u8], source: &Path) -> Result<(), LearnerError> {
-        let bad = |message: String| LearnerError::Checkpoint {
-            path: source.display().to_string(),
-            message,
-        };
-        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(bytes))
-            .map_err(|e| bad(e.to_string()))?;
-        let find = |k: &str| loaded.iter().find(|(n, _)| n == k).map(|(_, t)| t);
-        tch::no_grad(|| -> Result<(), LearnerError> {
-            let fine_tuned = self.traverser.fine_tuned().map(|vs| ("pi_g", vs));
-            for (prefix, vs) in std::iter::once(("worker", &self.worker.vs))
-                .chain(self.manager.as_ref().map(|m| ("manager", &m.vs)))
-                .chain(fine_tuned)
-            {
-                for (k, mut t) in vs.variables() {
-                    let key = format!("{prefix}/{k}");
-                    let src = find(&key).ok_or_else(|| bad(format!("no tensor {key}")))?;
-                    if src.size() != t.size() {
-                        return Err(bad(format!(
-                            "{key} has shape {:?}, expected {:?}",
-                            src.size(),
-                            t.size()
-                        )));
-                    }
-                    t.copy_(src);
-                }
-            }
-            Ok(())
-        })?;
-        let strip = |prefix: &str| -> Vec<(String, Tensor)> {
-            loaded
-                .iter()
-                .filter_map(|(k, t)| {
-                    k.strip_prefix(prefix)
-                        .map(|s| (s.to_string(), t.shallow_clone()))
-                })
-                .collect()
-        };
-        self.worker.opt.load_state(&strip("worker-")).map_err(bad)?;
-        if let Some(m) = self.manager.as_mut() {
-            m.opt.load_state(&strip("manager-")).map_err(bad)?;
-            m.weights_changed();
+        let bad = |message: String| checkpoint_error(source, message);
+        let loaded = named_tensors_of(bytes, source)?;
+        let fine_tuned = self.traverser.fine_tuned().map(|vs| ("pi_g", vs));
+        for (prefix, vs) in std::iter::once(("worker", &self.worker.learner.vs))
+            .chain(std::iter::once(("manager", &self.manager.vs)))
+            .chain(fine_tuned)
+        {
+            load_variables(prefix, vs, &loaded).map_err(bad)?;
         }
+        let strip = |prefix: &str| moments_of(prefix, &loaded);
+        self.worker
+            .learner
+            .opt
+            .load_state(&strip("worker"))
+            .map_err(bad)?;
+        self.manager
+            .opt
+            .load_state(&strip("manager"))
+            .map_err(bad)?;
+        self.manager.weights_changed();
         if let Some(s) = self.traverser.steering_mut() {
-            s.optimiser_mut().load_state(&strip("pi_g-")).map_err(bad)?;
+            s.optimiser_mut().load_state(&strip("pi_g")).map_err(bad)?;
         }
         Ok(())
     }
+}
+
+/// The size of `env`'s batch, which must be `envs`, the one an agent was
+/// built for.
+pub(super) fn check_batch(envs: usize, env: &dyn BatchEnvironment) -> Result<usize, LearnerError> {
+    let n = env.num_envs();
+    if n != envs {
+        return Err(ConfigError::new(
+            "envs",
+            format!("the agent was built for {envs} environments, the batch has {n}"),
+        )
+        .into());
+    }
+    Ok(n)
 }

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 use sim::{Layout, Task};
 
 use crate::a2c::A2cConfig;
+use crate::a2c::net::ActorCriticConfig;
 use crate::a2c::rollout::GradPath;
 use crate::error::{ConfigError, LearnerError};
 use crate::gcp::GoalConditionedPolicy;
@@ -454,6 +455,17 @@ impl AgentConfig {
             AgentKind::A2c => 0,
             AgentKind::Feudal => 1,
             AgentKind::WideNarrow => 2,
+        }
+    }
+
+    /// The Worker's network (the baseline's) with `num_actions` outputs:
+    /// the sizes set here, [`Self::goal_planes`] on its input.
+    pub fn network(&self, num_actions: usize) -> ActorCriticConfig {
+        ActorCriticConfig {
+            conv_channels: self.conv_channels,
+            hidden: self.hidden,
+            num_actions: num_actions as i64,
+            goal_planes: self.goal_planes(),
         }
     }
 

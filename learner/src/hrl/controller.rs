@@ -29,6 +29,44 @@ use crate::a2c::net::{ActorCritic, LstmState};
 use crate::error::LearnerError;
 use crate::gcp::GoalConditionedPolicy;
 
+/// Training visits of each cell, by environment: the count-based
+/// exploration bonus `β / √n` ([`super::config::AgentConfig::count_bonus`];
+/// MiniGrid's `PositionBonus`). Empty until the first bonus is paid.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub(super) struct VisitCounts(Vec<Vec<u32>>);
+
+impl VisitCounts {
+    /// Counts a training visit of `cell` (of a grid of `cells`) in
+    /// environment `e` of `envs` and returns the bonus `beta / √n`, `n` the
+    /// visits so far, this one included.
+    pub(super) fn bonus(
+        &mut self,
+        e: usize,
+        envs: usize,
+        cell: u32,
+        cells: usize,
+        beta: f32,
+    ) -> f32 {
+        if self.0.is_empty() {
+            self.0 = vec![vec![0; cells]; envs];
+        }
+        let n = &mut self.0[e][cell as usize];
+        *n += 1;
+        beta / (*n as f32).sqrt()
+    }
+
+    /// No bonus has been paid yet.
+    pub(super) fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// Environments counted (0 before the first bonus).
+    pub(super) fn envs(&self) -> usize {
+        self.0.len()
+    }
+}
+
 /// One environment's hierarchical state.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub(super) struct EnvCtl {
@@ -59,9 +97,9 @@ impl EnvCtl {
 /// action RNG, and (training) the Manager's decision queues.
 #[derive(Debug)]
 pub(super) struct Controller {
-    /// The Worker's (the baseline's) core state.
+    /// The Worker's core state.
     pub(super) worker_state: LstmState,
-    /// The Manager's core state (FN, WN).
+    /// The Manager's core state.
     pub(super) manager_state: Option<LstmState>,
     /// `π_g`'s core state while it steers traversals (with `π_g`).
     pub(super) steer_state: Option<LstmState>,
@@ -74,9 +112,8 @@ pub(super) struct Controller {
     /// Draws the Worker's, the Manager's and `π_g`'s actions.
     pub(super) rng: ReplayRng,
     /// Training visits of each cell, by environment (the count-based
-    /// bonus, [`super::config::AgentConfig::count_bonus`]); empty until
-    /// the first bonus is paid.
-    pub(super) visits: Vec<Vec<u32>>,
+    /// bonus).
+    pub(super) visits: VisitCounts,
 }
 
 /// What of a [`Controller`] is not a tensor, as saved with a training
@@ -87,8 +124,8 @@ struct ControllerRecord {
     queues: Vec<DecisionQueue>,
     rng: RngState,
     /// Absent from the checkpoints of runs before the count-based bonus.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    visits: Vec<Vec<u32>>,
+    #[serde(default, skip_serializing_if = "VisitCounts::is_empty")]
+    visits: VisitCounts,
 }
 
 /// A training controller as a checkpoint saves it
@@ -126,20 +163,8 @@ impl Controller {
                 .collect(),
             manager_init: manager.map(|m| m.zero_state(n as i64)),
             rng: ReplayRng::seed_from_u64(seed),
-            visits: Vec::new(),
+            visits: VisitCounts::default(),
         }
-    }
-
-    /// Counts a training visit of `cell` (of a grid of `cells`) in
-    /// environment `e` and returns the count-based bonus `beta / √n`, `n`
-    /// the visits so far, this one included (MiniGrid's `PositionBonus`).
-    pub(super) fn visit_bonus(&mut self, e: usize, cell: u32, cells: usize, beta: f32) -> f32 {
-        if self.visits.is_empty() {
-            self.visits = vec![vec![0; cells]; self.envs.len()];
-        }
-        let n = &mut self.visits[e][cell as usize];
-        *n += 1;
-        beta / (*n as f32).sqrt()
     }
 
     /// The Worker's goals, by environment.
@@ -204,21 +229,12 @@ impl Controller {
             path: "controller".into(),
             message: e.to_string(),
         })?;
-        let mut named: Vec<(String, &Tensor)> = Vec::new();
-        for (name, s) in [
+        let tensors = save_core_states(&[
             ("worker", Some(&self.worker_state)),
             ("manager", self.manager_state.as_ref()),
             ("steer", self.steer_state.as_ref()),
             ("manager_init", self.manager_init.as_ref()),
-        ] {
-            if let Some(s) = s {
-                named.push((format!("{name}/h"), &s.h));
-                named.push((format!("{name}/c"), &s.c));
-            }
-        }
-        let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), *t)).collect();
-        let mut tensors = Vec::new();
-        Tensor::save_multi_to_stream(&refs, &mut tensors)?;
+        ])?;
         Ok(SavedController {
             record: json,
             tensors,
@@ -244,7 +260,7 @@ impl Controller {
             serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
         if record.envs.len() != envs
             || record.queues.len() != envs
-            || !(record.visits.is_empty() || record.visits.len() == envs)
+            || !(record.visits.is_empty() || record.visits.envs() == envs)
         {
             return Err(bad(format!(
                 "a controller of {} environments, the agent has {}",
@@ -252,16 +268,8 @@ impl Controller {
                 envs
             )));
         }
-        let loaded = Tensor::load_multi_from_stream(std::io::Cursor::new(tensors))
-            .map_err(|e| bad(e.to_string()))?;
-        let state = |name: &str| -> Result<Option<LstmState>, LearnerError> {
-            let find = |k: String| loaded.iter().find(|(n, _)| *n == k).map(|(_, t)| t.copy());
-            match (find(format!("{name}/h")), find(format!("{name}/c"))) {
-                (Some(h), Some(c)) => Ok(Some(LstmState { h, c })),
-                (None, None) => Ok(None),
-                _ => Err(bad(format!("half a core state {name}"))),
-            }
-        };
+        let loaded = CoreStates::load(tensors).map_err(bad)?;
+        let state = |name: &str| loaded.get(name).map_err(bad);
         let worker = state("worker")?.ok_or_else(|| bad("no Worker core state".into()))?;
         let (manager, steer, manager_init) =
             (state("manager")?, state("steer")?, state("manager_init")?);
@@ -281,5 +289,45 @@ impl Controller {
             visits: record.visits,
         };
         Ok(())
+    }
+}
+
+/// Core states `(name, state)` as a tensor file (`<name>/h`, `<name>/c`);
+/// the absent ones are left out.
+pub(super) fn save_core_states(
+    states: &[(&str, Option<&LstmState>)],
+) -> Result<Vec<u8>, LearnerError> {
+    let mut named: Vec<(String, &Tensor)> = Vec::new();
+    for (name, s) in states {
+        if let Some(s) = s {
+            named.push((format!("{name}/h"), &s.h));
+            named.push((format!("{name}/c"), &s.c));
+        }
+    }
+    let refs: Vec<(&str, &Tensor)> = named.iter().map(|(k, t)| (k.as_str(), *t)).collect();
+    let mut tensors = Vec::new();
+    Tensor::save_multi_to_stream(&refs, &mut tensors)?;
+    Ok(tensors)
+}
+
+/// The core states of a tensor file of [`save_core_states`].
+pub(super) struct CoreStates(Vec<(String, Tensor)>);
+
+impl CoreStates {
+    /// Reads `tensors`; an error says why it could not.
+    pub(super) fn load(tensors: &[u8]) -> Result<CoreStates, String> {
+        Tensor::load_multi_from_stream(std::io::Cursor::new(tensors))
+            .map(CoreStates)
+            .map_err(|e| e.to_string())
+    }
+
+    /// The state saved as `name`, if any; half a state is an error.
+    pub(super) fn get(&self, name: &str) -> Result<Option<LstmState>, String> {
+        let find = |k: String| self.0.iter().find(|(n, _)| *n == k).map(|(_, t)| t.copy());
+        match (find(format!("{name}/h")), find(format!("{name}/c"))) {
+            (Some(h), Some(c)) => Ok(Some(LstmState { h, c })),
+            (None, None) => Ok(None),
+            _ => Err(format!("half a core state {name}")),
+        }
     }
 }

@@ -9,7 +9,7 @@
 //!    `ManagerSide::decide`);
 //! 2. an environment whose agent stands on a pivotal state with a route to
 //!    its wide goal hands over to a world graph traversal (section 4.3);
-//! 3. the Worker (the baseline) samples every environment's action, and a
+//! 3. the Worker samples every environment's action, and a
 //!    traversal under way overrides it with its own;
 //! 4. the environments step;
 //! 5. each step is booked: the task's reward for the Manager's interval,
@@ -23,17 +23,15 @@
 //! ([`HrlAgent::train_iteration`]); evaluation plays one episode per
 //! environment without recording ([`HrlAgent::evaluate`]).
 
-use sim::action;
-
 use super::agent::{EVAL_SALT, HrlAgent};
-use super::baseline;
 use super::config::HandOver;
 use super::controller::Controller;
-use super::reports::{EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, reached_exit};
+use super::reports::{
+    EpisodeTrace, EvalResult, IterationStats, StepCounts, Tracing, play_episodes,
+};
 use super::steering::Leg;
 use super::traversal::{self, Execution, Traversal};
 use super::worker::{Arrival, EpisodeEnd, WorkerStep};
-use crate::a2c::LossFigures;
 use crate::a2c::input::mask;
 use crate::a2c::net::LstmState;
 use crate::batch_env::{BatchEnvironment, ObsView};
@@ -57,13 +55,13 @@ struct Acted {
 
 /// The booking of one batch step, by environment.
 struct StepBook {
-    /// The Worker's (the baseline's) rewards.
+    /// The Worker's rewards.
     rewards: Vec<f32>,
-    /// The Worker's goal episode (the baseline's episode) ended.
+    /// The Worker's goal episode ended.
     dones: Vec<bool>,
     /// 1 where the Worker chose the action, 0 for a traversal's.
     weights: Vec<f32>,
-    /// Worker goal episodes (baseline episodes) that the step limit cut:
+    /// Worker goal episodes that the step limit cut:
     /// bootstrapped from their final states.
     cut_worker: Vec<usize>,
     /// Manager intervals that the step limit cut, likewise.
@@ -96,9 +94,7 @@ impl HrlAgent {
         trace: Option<&mut Tracing<'_>>,
         stats: &mut StepCounts,
     ) -> Result<Acted, LearnerError> {
-        if let Some(m) = &self.manager {
-            stats.add(m.decide(ctl, obs, train, trace));
-        }
+        stats.add(self.manager.decide(ctl, obs, train, trace));
         if self.traverser.graph().is_some() {
             for (e, c) in ctl.envs.iter_mut().enumerate() {
                 self.traverser.try_start(&c.goal, &mut c.traversal, obs, e);
@@ -110,7 +106,7 @@ impl HrlAgent {
         let choices = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
         let mut actions: Vec<u8> = choices.iter().map(|&i| self.actions[i as usize]).collect();
         // Only object goals are judged on the objects under the goals.
-        let goal_objects = if self.cfg.object_goals && self.manager.is_some() {
+        let goal_objects = if self.cfg.object_goals {
             ctl.goals()
                 .enumerate()
                 .map(|(e, g)| {
@@ -188,19 +184,10 @@ impl HrlAgent {
             // The count-based exploration bonus (training only).
             let bonus = if train && self.cfg.count_bonus > 0.0 {
                 let cells = obs.env_cells(e).len();
-                ctl.visit_bonus(e, cell, cells, self.cfg.count_bonus)
+                ctl.visits.bonus(e, n, cell, cells, self.cfg.count_bonus)
             } else {
                 0.0
             };
-            if self.manager.is_none() {
-                (book.rewards[e], book.dones[e]) = baseline::task_step(m);
-                book.rewards[e] += bonus;
-                if m.truncated() {
-                    book.cut_worker.push(e);
-                }
-                book.weights[e] = 1.0;
-                continue;
-            }
             let mut interval_over = ended;
             if train {
                 ctl.book_manager_reward(e, m.reward + bonus);
@@ -271,12 +258,10 @@ impl HrlAgent {
                     self.cfg.worker.gamma,
                 );
             }
-            if let Some(m) = &self.manager
-                && !book.cut_manager.is_empty()
-            {
-                m.bootstrap_cut(ctl, &obs, &book.cut_manager);
+            if !book.cut_manager.is_empty() {
+                self.manager.bootstrap_cut(ctl, &obs, &book.cut_manager);
             }
-            self.worker.rollout.record(
+            self.worker.learner.rollout.record(
                 &self.recorded(&acted),
                 &book.rewards,
                 &book.dones,
@@ -345,7 +330,7 @@ impl HrlAgent {
     }
 
     /// One training iteration: a rollout of `T` steps, then the Worker's
-    /// (baseline's) and the Manager's updates.
+    /// and the Manager's updates.
     pub fn train_iteration(
         &mut self,
         env: &mut dyn BatchEnvironment,
@@ -353,7 +338,7 @@ impl HrlAgent {
         self.check_batch(env)?;
         let empty = self.controller(0, 0);
         let mut ctl = std::mem::replace(&mut self.ctl, empty);
-        self.worker.rollout.start(&ctl.worker_state);
+        self.worker.learner.rollout.start(&ctl.worker_state);
         self.traverser.start_fine_tuning(ctl.steer_state.as_ref());
         let mut counts = StepCounts::for_task(self.task);
         for _ in 0..self.cfg.rollout_len {
@@ -361,19 +346,19 @@ impl HrlAgent {
         }
         {
             let obs = env.observe();
-            if let Some(m) = &self.manager {
-                counts.add(m.decide(&mut ctl, &obs, true, None));
-            }
+            counts.add(self.manager.decide(&mut ctl, &obs, true, None));
             let marks = self.worker.goal_marks(ctl.goals());
             self.worker.bootstrap(&obs, &marks, &ctl.worker_state);
             self.traverser
                 .fine_tune(&obs, &ctl.traversals(), ctl.steer_state.as_ref());
         }
-        let worker = self.worker.update(&self.cfg.worker, &mut self.times);
-        let manager = match self.manager.as_mut() {
-            Some(m) => m.update(&mut ctl, &self.cfg.manager, &mut self.times),
-            None => LossFigures::default(),
-        };
+        let worker = self
+            .worker
+            .learner
+            .update(&self.cfg.worker, &mut self.times);
+        let manager = self
+            .manager
+            .update(&mut ctl, &self.cfg.manager, &mut self.times);
         ctl.detach();
         self.ctl = ctl;
         Ok(counts.iteration(worker, manager))
@@ -388,58 +373,10 @@ impl HrlAgent {
         seed: u64,
         trace: Option<&mut EpisodeTrace>,
     ) -> Result<EvalResult, LearnerError> {
-        let n = env.num_envs();
-        env.step(&vec![action::RESET; n])?;
-        let mut ctl = self.controller(n, sim::env_seed(seed ^ EVAL_SALT, 0));
-        let mut done = vec![false; n];
-        let mut returns = vec![0f32; n];
-        let mut lengths = vec![0u32; n];
-        let mut balls = vec![0u8; n];
-        let mut success = vec![false; n];
-        let mut counts = StepCounts::for_task(self.task);
-        let mut trace = trace.map(|t| {
-            *t = EpisodeTrace::default();
-            let obs = env.observe();
-            t.cells.push(obs.meta[0].cell(self.width) as u32);
-            t.start_cells = obs.env_cells(0).to_vec();
-            Tracing {
-                env: 0,
-                step: 0,
-                trace: t,
-            }
-        });
-        while done.iter().any(|d| !d) {
-            let traced = trace.as_mut().filter(|_| !done[0]);
-            self.step_batch(&mut ctl, env, false, traced, &mut counts)?;
-            let obs = env.observe();
-            for e in 0..n {
-                let m = &obs.meta[e];
-                if !done[e] && m.done() {
-                    done[e] = true;
-                    returns[e] = m.episode_return;
-                    lengths[e] = m.episode_len;
-                    balls[e] = m.balls;
-                    success[e] = reached_exit(&obs, e);
-                }
-            }
-        }
-        if let Some(t) = trace {
-            t.trace.episode_return = returns[0];
-        }
-        let mean_return = returns.iter().map(|&r| f64::from(r)).sum::<f64>() / n.max(1) as f64;
-        let success_rate = success.iter().filter(|&&s| s).count() as f64 / n.max(1) as f64;
-        Ok(EvalResult {
-            score: if self.task == sim::Task::DoorKey {
-                success_rate
-            } else {
-                mean_return
-            },
-            mean_return,
-            success_rate,
-            returns,
-            lengths,
-            balls,
-            traversal_share: counts.traversal_share(),
+        let mut ctl = self.controller(env.num_envs(), sim::env_seed(seed ^ EVAL_SALT, 0));
+        let (task, width) = (self.task, self.width);
+        play_episodes(env, task, width, trace, |env, traced, counts| {
+            self.step_batch(&mut ctl, env, false, traced, counts)
         })
     }
 }

@@ -3,7 +3,8 @@
 //!
 //! The paper's parts, one module each:
 //!
-//! - [`a2c`]: the A2C-LSTM baseline (section 4.1);
+//! - [`baseline`]: the A2C-LSTM baseline (section 4.1), a flat agent of
+//!   its own ([`A2cAgent`]);
 //! - [`feudal`]: the Feudal Manager's network on its own time scale
 //!   (section 4.1);
 //! - [`wide_narrow`]: Wide-then-Narrow Manager instructions (section 4.2);
@@ -25,13 +26,15 @@
 //! - `run`: a batch step, training iterations, evaluation;
 //! - [`stats`]: what training and evaluation report.
 //!
-//! [`HrlAgent`] runs one of them on a
-//! [`BatchEnvironment`](crate::batch_env::BatchEnvironment): `A2C`, `FN`
-//! (Manager over every valid cell) or `WN` (wide goals from `V_all`,
-//! `V_rand` or `V_p`), each optionally initialised from `π_g`, WN
-//! optionally with traversal. Training is the A2C core's
-//! ([`crate::a2c`]): the Worker (or the baseline) learns from `[T, B]`
-//! rollouts, the Manager from its decision queues.
+//! [`HrlAgent`] runs a hierarchy on a
+//! [`BatchEnvironment`](crate::batch_env::BatchEnvironment): `FN` (Manager
+//! over every valid cell) or `WN` (wide goals from `V_all`, `V_rand` or
+//! `V_p`), each optionally initialised from `π_g`, WN optionally with
+//! traversal; [`A2cAgent`] runs the flat baseline, and [`Agent`]
+//! (`stage2`) is either, as a run trains it. Training is the A2C core's
+//! ([`crate::a2c`]): the baseline and the Worker learn from `[T, B]`
+//! rollouts ([`crate::a2c::learner::A2cLearner`]), the Manager from its
+//! decision queues.
 //!
 //! A run starts its training stream once ([`HrlAgent::start_segment`]) and
 //! carries it across validations; a checkpoint saves the controller
@@ -48,18 +51,21 @@ mod iteration;
 mod manager;
 mod manager_kernels;
 pub mod reports;
+mod stage2;
 pub mod steering;
 pub mod traversal;
 pub mod wide_narrow;
 pub mod worker;
 
 pub use agent::HrlAgent;
+pub use baseline::A2cAgent;
 pub use config::{
     AgentConfig, AgentKind, Candidates, DoorKeyActions, HandOver, ObjectActionInit, WorkerTaskEnd,
     WorldGraphInputs,
 };
 pub use controller::SavedController;
 pub use reports::{EpisodeTrace, EvalResult, IterationStats};
+pub use stage2::Agent;
 
 #[cfg(test)]
 mod tests;

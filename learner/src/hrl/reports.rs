@@ -8,7 +8,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::a2c::LossFigures;
-use crate::batch_env::ObsView;
+use crate::batch_env::{BatchEnvironment, ObsView};
+use crate::error::LearnerError;
 
 /// What one iteration measured.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
@@ -290,6 +291,123 @@ impl Tracing<'_> {
                 .get(e * cpe..(e + 1) * cpe)
                 .map(<[u8]>::to_vec)
                 .unwrap_or_default();
+        }
+    }
+}
+
+/// Plays one episode in every environment of `env`, freshly reset, for
+/// an evaluation on `task` (a grid `width` cells wide): `step` steps the
+/// whole batch, with the trace of environment 0's episode while it runs,
+/// until every environment's first episode has ended; `trace` records that
+/// episode.
+pub(super) fn play_episodes(
+    env: &mut dyn BatchEnvironment,
+    task: sim::Task,
+    width: usize,
+    trace: Option<&mut EpisodeTrace>,
+    mut step: impl FnMut(
+        &mut dyn BatchEnvironment,
+        Option<&mut Tracing<'_>>,
+        &mut StepCounts,
+    ) -> Result<(), LearnerError>,
+) -> Result<EvalResult, LearnerError> {
+    let n = env.num_envs();
+    env.step(&vec![sim::action::RESET; n])?;
+    let mut episodes = EvalEpisodes::new(n);
+    let mut counts = StepCounts::for_task(task);
+    let mut trace = trace.map(|t| Tracing::start(t, &env.observe(), width));
+    while !episodes.all_done() {
+        let traced = trace.as_mut().filter(|_| !episodes.done(0));
+        step(env, traced, &mut counts)?;
+        episodes.record(&env.observe());
+    }
+    if let Some(t) = trace {
+        t.trace.episode_return = episodes.returns[0];
+    }
+    Ok(episodes.result(task, counts.traversal_share()))
+}
+
+/// The episodes of an evaluation, one per environment, each recorded when
+/// it first ends ([`Self::record`]) and scored by [`Self::result`]: the
+/// mean return (MultiGoal tasks) or the success rate (Door-Key).
+#[derive(Debug)]
+pub(super) struct EvalEpisodes {
+    done: Vec<bool>,
+    returns: Vec<f32>,
+    lengths: Vec<u32>,
+    balls: Vec<u8>,
+    success: Vec<bool>,
+}
+
+impl EvalEpisodes {
+    /// `n` environments, every episode under way.
+    pub(super) fn new(n: usize) -> EvalEpisodes {
+        EvalEpisodes {
+            done: vec![false; n],
+            returns: vec![0.0; n],
+            lengths: vec![0; n],
+            balls: vec![0; n],
+            success: vec![false; n],
+        }
+    }
+
+    /// Every episode has ended.
+    pub(super) fn all_done(&self) -> bool {
+        self.done.iter().all(|&d| d)
+    }
+
+    /// Environment `e`'s episode has ended.
+    pub(super) fn done(&self, e: usize) -> bool {
+        self.done[e]
+    }
+
+    /// Records the episodes that the step producing `obs` ended.
+    pub(super) fn record(&mut self, obs: &ObsView<'_>) {
+        for e in 0..self.done.len() {
+            let m = &obs.meta[e];
+            if !self.done[e] && m.done() {
+                self.done[e] = true;
+                self.returns[e] = m.episode_return;
+                self.lengths[e] = m.episode_len;
+                self.balls[e] = m.balls;
+                self.success[e] = reached_exit(obs, e);
+            }
+        }
+    }
+
+    /// The evaluation's result on `task`, with the share of steps taken by
+    /// traversal `traversal_share`.
+    pub(super) fn result(self, task: sim::Task, traversal_share: f64) -> EvalResult {
+        let n = self.done.len().max(1) as f64;
+        let mean_return = self.returns.iter().map(|&r| f64::from(r)).sum::<f64>() / n;
+        let success_rate = self.success.iter().filter(|&&s| s).count() as f64 / n;
+        EvalResult {
+            score: if task == sim::Task::DoorKey {
+                success_rate
+            } else {
+                mean_return
+            },
+            mean_return,
+            success_rate,
+            returns: self.returns,
+            lengths: self.lengths,
+            balls: self.balls,
+            traversal_share,
+        }
+    }
+}
+
+impl<'a> Tracing<'a> {
+    /// Starts tracing environment 0's episode into `trace` from `obs`, the
+    /// first observation (of a grid `width` cells wide).
+    pub(super) fn start(trace: &'a mut EpisodeTrace, obs: &ObsView<'_>, width: usize) -> Self {
+        *trace = EpisodeTrace::default();
+        trace.cells.push(obs.meta[0].cell(width) as u32);
+        trace.start_cells = obs.env_cells(0).to_vec();
+        Tracing {
+            env: 0,
+            step: 0,
+            trace,
         }
     }
 }

@@ -51,7 +51,7 @@ fn a_truncated_step_is_bootstrapped_and_a_terminated_one_is_not() {
         conv_channels: [4, 8],
         ..AgentConfig::default()
     };
-    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 1).expect("agent");
+    let mut agent = A2cAgent::new(&cfg, &layout, Task::MultiGoal, 1).expect("agent");
     let mut env = Recorder {
         env: InProcess::new(layout.clone(), env_cfg, 8, 2, 1).expect("env"),
         steps: Vec::new(),
@@ -66,8 +66,8 @@ fn a_truncated_step_is_bootstrapped_and_a_terminated_one_is_not() {
         for (e, m) in metas.iter().enumerate() {
             let i = t * 8 + e;
             let (booked, done) = (
-                agent.worker.rollout.rewards[i],
-                agent.worker.rollout.dones[i],
+                agent.learner.rollout.rewards[i],
+                agent.learner.rollout.dones[i],
             );
             if m.terminated() {
                 terminated += 1;
@@ -173,7 +173,7 @@ fn the_manager_decides_for_every_environment_on_the_first_step() {
     let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
     let mut env = corridors(n, 100);
     let mut ctl = agent.controller(n, 11);
-    agent.worker.rollout.start(&ctl.worker_state);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
     let mut counts = reports::StepCounts::default();
     agent
         .step_batch(&mut ctl, &mut env, true, None, &mut counts)
@@ -222,7 +222,11 @@ fn the_workers_goal_marks_land_on_the_goal_cells() {
             .expect("step");
         assert_eq!(counts.decisions, 0, "no decision while the interval runs");
         let marks = agent.worker.goal_marks(ctl.goals());
-        let input = agent.worker.input(&env.observe(), &marks).to_dense();
+        let input = agent
+            .worker
+            .learner
+            .input(&env.observe(), agent.worker.marks(&marks))
+            .to_dense();
         assert_eq!(
             input.size()[1],
             (crate::a2c::input::BASE_CHANNELS + planes) as i64
@@ -258,7 +262,7 @@ fn an_environment_whose_episode_ends_gets_a_fresh_decision_next_step() {
     // neither the episode nor the interval, the second ends both.
     let mut env = corridors(n, 2);
     let mut ctl = agent.controller(n, 11);
-    agent.worker.rollout.start(&ctl.worker_state);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
     hand_goals(&mut ctl, at(6, 1), at(6, 1), at(1, 1));
     let mut counts = reports::StepCounts::default();
     agent
@@ -312,7 +316,7 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
     let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 5).expect("agent");
     let mut env = corridors(n, 100);
     let mut ctl = agent.controller(n, 11);
-    agent.worker.rollout.start(&ctl.worker_state);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
     // The agent stands on a node with a route to g_w: it traverses.
     hand_goals(&mut ctl, at(4, 1), at(5, 1), at(1, 1));
     let mut counts = reports::StepCounts::default();
@@ -331,7 +335,7 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
         assert_eq!(counts.traversal_steps, u64::from(step) * n as u64);
     }
     assert_eq!(
-        agent.worker.rollout.weights,
+        agent.worker.learner.rollout.weights,
         vec![0.0; 3 * n],
         "traversal steps are no Worker steps"
     );
@@ -355,7 +359,7 @@ fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpo
     let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
     let mut env = corridors(n, 100);
     let mut ctl = agent.controller(n, 11);
-    agent.worker.rollout.start(&ctl.worker_state);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
     let mut counts = reports::StepCounts::default();
     let mut visits = vec![std::collections::HashMap::<u32, u32>::new(); n];
     let mut expected = vec![0f32; n];

@@ -22,18 +22,14 @@
 //!
 //! The Worker sees its goals as marks on goal planes of its input
 //! ([`goal_marks`]): the subgoal (FN), or `g_w` and `g_n` on planes of
-//! their own (WN). Inside the agent, `WorkerSide` owns its network, var
-//! store, optimiser and training rollout; the A2C baseline (section 4.1) is
-//! the same side without goal planes.
-
-use tch::nn;
+//! their own (WN). Inside the agent, `WorkerSide` owns its A2C learner
+//! ([`A2cLearner`]: network, optimiser, rollout), the kind the flat A2C
+//! baseline ([`super::baseline`]) trains without goal planes.
 
 use super::config::{AgentConfig, AgentKind, WorkerTaskEnd};
-use crate::a2c::input::{CellInput, GoalMarks, NO_GOAL, goal_planes};
-use crate::a2c::net::{ActorCritic, ActorCriticConfig, ActorCriticOutput, LstmState};
-use crate::a2c::optim::Adam;
-use crate::a2c::rollout::{GradPath, Rollout, bootstrap_truncated, bootstrap_values};
-use crate::a2c::{A2cConfig, LossFigures, PhaseTimes};
+use crate::a2c::input::{GoalMarks, NO_GOAL};
+use crate::a2c::learner::A2cLearner;
+use crate::a2c::net::{ActorCriticOutput, LstmState};
 use crate::batch_env::ObsView;
 
 /// How the environment's episode stands after a step.
@@ -240,20 +236,15 @@ pub fn goal_marks<'a>(kind: AgentKind, goals: impl Iterator<Item = &'a WorkerGoa
     }
 }
 
-/// The Worker's side of an agent (the baseline's, for A2C): its
-/// goal-conditioned network, var store and optimiser, and the rollout it
-/// learns from.
+/// The Worker's side of an agent: its goal-conditioned A2C learner
+/// (network, var store, optimiser, rollout) and how its goals mark its
+/// input.
 #[derive(Debug)]
 pub(super) struct WorkerSide {
     kind: AgentKind,
     /// Goal planes of the input ([`AgentConfig::goal_planes`]).
     planes: usize,
-    width: usize,
-    height: usize,
-    pub(super) vs: nn::VarStore,
-    pub(super) net: ActorCritic,
-    pub(super) opt: Adam,
-    pub(super) rollout: Rollout,
+    pub(super) learner: A2cLearner,
 }
 
 impl WorkerSide {
@@ -266,31 +257,19 @@ impl WorkerSide {
         height: usize,
         num_actions: usize,
     ) -> WorkerSide {
-        let net_cfg = ActorCriticConfig {
-            conv_channels: cfg.conv_channels,
-            hidden: cfg.hidden,
-            num_actions: num_actions as i64,
-            goal_planes: cfg.goal_planes(),
-        };
-        let vs = nn::VarStore::new(tch::Device::Cpu);
-        let net = ActorCritic::new(&vs.root(), &net_cfg, width, height);
-        let opt = Adam::new(&[("worker", &vs)], cfg.worker.learning_rate);
         WorkerSide {
             kind: cfg.kind,
             planes: cfg.goal_planes(),
-            width,
-            height,
-            vs,
-            net,
-            opt,
-            rollout: Rollout::new(cfg.grad_path, cfg.envs),
+            learner: A2cLearner::new(
+                &cfg.network(num_actions),
+                width,
+                height,
+                "worker",
+                cfg.worker.learning_rate,
+                cfg.grad_path,
+                cfg.envs,
+            ),
         }
-    }
-
-    /// Rebuilds the (empty) rollout of `envs` environments with gradient
-    /// path `path`.
-    pub(super) fn set_grad_path(&mut self, path: GradPath, envs: usize) {
-        self.rollout = Rollout::new(path, envs);
     }
 
     /// The goal marks of `goals` ([`goal_marks`]).
@@ -298,8 +277,7 @@ impl WorkerSide {
         goal_marks(self.kind, goals)
     }
 
-    /// `cells` (of [`Self::goal_marks`]) as the goal planes of the input
-    /// (none for the baseline).
+    /// `cells` (of [`Self::goal_marks`]) as the goal planes of the input.
     pub(super) fn marks<'a>(&self, cells: &'a [u32]) -> Option<GoalMarks<'a>> {
         (self.planes > 0).then_some(GoalMarks {
             cells,
@@ -317,21 +295,8 @@ impl WorkerSide {
         state: &LstmState,
         train: bool,
     ) -> ActorCriticOutput {
-        if train {
-            self.rollout.act(&self.net, obs, self.marks(marks), state)
-        } else {
-            let input = self.input(obs, marks);
-            tch::no_grad(|| self.net.step(&input, state))
-        }
-    }
-
-    /// The network's input of `obs` with the goals `marks` (of
-    /// [`Self::goal_marks`]) on its goal planes.
-    pub(super) fn input(&self, obs: &ObsView<'_>, marks: &[u32]) -> CellInput {
         let goals = self.marks(marks);
-        let mut input = CellInput::new(self.width, self.height, goal_planes(goals));
-        input.push_obs(obs, goals);
-        input
+        self.learner.act(obs, goals, state, train)
     }
 
     /// Adds `γ · V(s_final)` to the `rewards` of the environments `cut`,
@@ -347,24 +312,14 @@ impl WorkerSide {
         gamma: f64,
     ) {
         let goals = self.marks(marks);
-        bootstrap_truncated(rewards, &self.net, obs, goals, state, cut, gamma);
+        self.learner
+            .bootstrap_truncated(rewards, obs, goals, state, cut, gamma);
     }
 
     /// The rollout's bootstrap values `V(s_T)` at `obs` towards `marks`.
     pub(super) fn bootstrap(&mut self, obs: &ObsView<'_>, marks: &[u32], state: &LstmState) {
         let goals = self.marks(marks);
-        self.rollout.bootstrap = bootstrap_values(&self.net, obs, goals, state);
-    }
-
-    /// The A2C update on the rollout (`cfg`: the Worker's settings); the
-    /// time it took goes to `times`.
-    pub(super) fn update(&mut self, cfg: &A2cConfig, times: &mut PhaseTimes) -> LossFigures {
-        let t0 = std::time::Instant::now();
-        let (loss, figures) = self.rollout.loss(&self.net, cfg);
-        let t1 = PhaseTimes::lap(&mut times.loss, t0);
-        self.opt.backward_step(&loss, cfg.grad_clip_norm);
-        PhaseTimes::lap(&mut times.backward, t1);
-        figures
+        self.learner.bootstrap(obs, goals, state);
     }
 }
 

@@ -16,7 +16,7 @@ use sim::{Layout, Maze, Task};
 use crate::discovery::DiscoveryConfig;
 use crate::gcp::{GcpConfig, GoalConditionedPolicy};
 use crate::hrl::wide_narrow::wide_goal_candidates;
-use crate::hrl::{AgentConfig, AgentKind, Candidates, HrlAgent, WorldGraphInputs};
+use crate::hrl::{Agent, AgentConfig, AgentKind, Candidates, WorldGraphInputs};
 
 /// The world graph's file in a discovery run.
 pub const GRAPH_FILE: &str = "graph.json";
@@ -343,7 +343,7 @@ pub fn build_agent(
     task: Task,
     world_graph: Option<&Path>,
     seed: u64,
-) -> anyhow::Result<HrlAgent> {
+) -> anyhow::Result<Agent> {
     let inputs = load_inputs(cfg, layout, task, world_graph, seed)?;
-    Ok(HrlAgent::new(cfg, layout, task, inputs, seed)?)
+    Ok(Agent::new(cfg, layout, task, inputs, seed)?)
 }

@@ -24,7 +24,7 @@ use sim::{BatchEnv, EnvConfig, Layout, Object, Task};
 use super::config::{RunIdentity, TrainConfig};
 use crate::batch_env::{BatchEnvironment, InProcess};
 use crate::hrl::wide_narrow::Coverage;
-use crate::hrl::{EpisodeTrace, EvalResult, HrlAgent, IterationStats};
+use crate::hrl::{Agent, EpisodeTrace, EvalResult, IterationStats};
 
 /// Environment stream of the validation seeds: validation seed `v` is the
 /// environment `(VALIDATION_STREAM, v)`.
@@ -170,7 +170,7 @@ fn checkpoint_files(k: u64) -> [String; 4] {
 pub fn save_state(
     dir: &Path,
     state: &RunState,
-    agent: &HrlAgent,
+    agent: &Agent,
     best: Option<&[u8]>,
     env: Option<&dyn BatchEnvironment>,
 ) -> anyhow::Result<()> {
@@ -212,17 +212,17 @@ pub fn read_state(dir: &Path) -> anyhow::Result<Option<RunState>> {
 
 /// Loads the weights (and optimiser moments) of `state`'s checkpoint in
 /// `dir` into `agent`.
-pub fn load_weights(dir: &Path, state: &RunState, agent: &mut HrlAgent) -> anyhow::Result<()> {
+pub fn load_weights(dir: &Path, state: &RunState, agent: &mut Agent) -> anyhow::Result<()> {
     let [weights, ..] = checkpoint_files(state.segments_done);
     load_file(&dir.join("checkpoint").join(weights), agent)
 }
 
 /// Loads the best checkpoint of the run in `dir` into `agent`.
-pub fn load_best(dir: &Path, agent: &mut HrlAgent) -> anyhow::Result<()> {
+pub fn load_best(dir: &Path, agent: &mut Agent) -> anyhow::Result<()> {
     load_file(&dir.join("checkpoint").join("best.ot"), agent)
 }
 
-fn load_file(path: &Path, agent: &mut HrlAgent) -> anyhow::Result<()> {
+fn load_file(path: &Path, agent: &mut Agent) -> anyhow::Result<()> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     agent.load_bytes(&bytes, path)?;
     Ok(())
@@ -234,7 +234,7 @@ fn load_file(path: &Path, agent: &mut HrlAgent) -> anyhow::Result<()> {
 pub fn restore_training(
     dir: &Path,
     state: &RunState,
-    agent: &mut HrlAgent,
+    agent: &mut Agent,
     env: &mut dyn BatchEnvironment,
 ) -> anyhow::Result<bool> {
     let ckpt = dir.join("checkpoint");
@@ -428,7 +428,7 @@ pub fn train_segments(
     layout: &Layout,
     env_cfg: EnvConfig,
     state: &mut RunState,
-    agent: &mut HrlAgent,
+    agent: &mut Agent,
     env: &mut dyn BatchEnvironment,
     observer: &mut dyn Observer,
 ) -> anyhow::Result<()> {
@@ -488,7 +488,7 @@ pub fn test(
     task: Task,
     seed: u64,
     state: &RunState,
-    agent: &mut HrlAgent,
+    agent: &mut Agent,
 ) -> anyhow::Result<(TestSummary, EvalResult, EpisodeTrace)> {
     load_best(dir, agent)?;
     let mut test_env = eval_env(layout, env_cfg, TEST_STREAM, 0, cfg.test_seeds)?;
@@ -566,7 +566,7 @@ mod tests {
             envs: 1,
             ..AgentConfig::default()
         };
-        let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 3).unwrap();
+        let mut agent = Agent::new(&cfg, &layout, Task::MultiGoal, None, 3).unwrap();
         let env_cfg = EnvConfig::for_task(Task::MultiGoal, &layout);
         let mut env = eval_env(&layout, env_cfg, TEST_STREAM, 0, 2).unwrap();
         let mut t = EpisodeTrace::default();

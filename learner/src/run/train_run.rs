@@ -17,7 +17,7 @@ use super::protocol::{
     self, Observer, RunState, Schedule, TEST_STREAM, TestSummary, VALIDATION_STREAM,
 };
 use crate::batch_env::BatchEnvironment;
-use crate::hrl::{EpisodeTrace, EvalResult, HrlAgent};
+use crate::hrl::{Agent, EpisodeTrace, EvalResult};
 
 /// The file a run trained on a layout file keeps a copy of it in.
 pub const LAYOUT_FILE: &str = "layout.txt";
@@ -60,7 +60,7 @@ pub struct TrainRun {
     /// What the run is, its settings resolved (as written to `config.toml`).
     spec: TrainSpec,
     /// The agent.
-    pub agent: HrlAgent,
+    pub agent: Agent,
     /// Where the protocol stands.
     pub state: RunState,
     resumed: bool,
@@ -94,7 +94,7 @@ impl TrainRun {
         let candidates = known_candidates(&spec.config.agent, &spec.layout, inputs.as_ref());
         let auto = auto_values(&spec.config.agent, &spec.layout, candidates.as_deref());
         spec.config.agent = resolve_auto(&spec.config.agent, auto);
-        let mut agent = HrlAgent::new(
+        let mut agent = Agent::new(
             &spec.config.agent,
             &spec.layout,
             spec.task,
