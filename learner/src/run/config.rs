@@ -174,12 +174,45 @@ impl TrainConfig {
     }
 }
 
-/// The env steps a run of `cfg` trains: its budget rounded up to whole
-/// segments of whole iterations.
+/// The env steps a run of `cfg` trains ([`Schedule::trained_env_steps`]).
 pub fn trained_env_steps(cfg: &TrainConfig) -> u64 {
-    let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
-    let per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1) * steps_per_iter;
-    cfg.env_steps.div_ceil(per_segment) * per_segment
+    Schedule::of(cfg).trained_env_steps()
+}
+
+/// How a budget divides: iterations of `envs × rollout_len` env steps,
+/// whole iterations per segment, whole segments per run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Schedule {
+    /// Env steps of one iteration (one update).
+    pub steps_per_iter: u64,
+    /// Iterations of one segment (`eval_every` rounded up).
+    pub iters_per_segment: u64,
+    /// Segments of the run (the budget rounded up).
+    pub segments: u64,
+}
+
+impl Schedule {
+    /// The schedule of `cfg`.
+    pub fn of(cfg: &TrainConfig) -> Schedule {
+        let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
+        let iters_per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1);
+        Schedule {
+            steps_per_iter,
+            iters_per_segment,
+            segments: cfg.env_steps.div_ceil(iters_per_segment * steps_per_iter),
+        }
+    }
+
+    /// Env steps of one segment.
+    pub fn steps_per_segment(&self) -> u64 {
+        self.iters_per_segment * self.steps_per_iter
+    }
+
+    /// Env steps of the whole run: the budget rounded up to whole segments
+    /// of whole iterations.
+    pub fn trained_env_steps(&self) -> u64 {
+        self.segments * self.steps_per_segment()
+    }
 }
 
 /// What `0 = auto` stands for in `cfg` on this run, from the maze and the

@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use sim::atomic_file::write_atomic;
 use sim::{BatchEnv, EnvConfig, Layout, Object, Task};
 
-use super::config::{RunIdentity, TrainConfig};
+use super::config::{RunIdentity, Schedule, TrainConfig};
 use crate::batch_env::{BatchEnvironment, InProcess};
 use crate::hrl::wide_narrow::Coverage;
 use crate::hrl::{Agent, EpisodeTrace, EvalResult, IterationStats};
@@ -366,36 +366,6 @@ impl EpisodeOutcome {
                     && y == code(Object::DoorOpen)
             }),
         })
-    }
-}
-
-/// How a budget divides: iterations of `envs × rollout_len` env steps,
-/// whole iterations per segment, whole segments per run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Schedule {
-    /// Env steps of one iteration (one update).
-    pub steps_per_iter: u64,
-    /// Iterations of one segment (`eval_every` rounded up).
-    pub iters_per_segment: u64,
-    /// Segments of the run (the budget rounded up).
-    pub segments: u64,
-}
-
-impl Schedule {
-    /// The schedule of `cfg`.
-    pub fn of(cfg: &TrainConfig) -> Schedule {
-        let steps_per_iter = (cfg.agent.envs * cfg.agent.rollout_len) as u64;
-        let iters_per_segment = cfg.eval_every.div_ceil(steps_per_iter).max(1);
-        Schedule {
-            steps_per_iter,
-            iters_per_segment,
-            segments: cfg.env_steps.div_ceil(iters_per_segment * steps_per_iter),
-        }
-    }
-
-    /// Env steps of one segment.
-    pub fn steps_per_segment(&self) -> u64 {
-        self.iters_per_segment * self.steps_per_iter
     }
 }
 

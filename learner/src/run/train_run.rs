@@ -11,11 +11,11 @@ use sim::atomic_file::write_atomic;
 use sim::{EnvConfig, Layout, Task};
 
 use super::artefact::{known_candidates, load_inputs};
-use super::config::{RunIdentity, TrainConfig, auto_values, resolve_auto, trained_env_steps};
-use super::dir::{RunKind, check, lock, record_invocation};
-use super::protocol::{
-    self, Observer, RunState, Schedule, TEST_STREAM, TestSummary, VALIDATION_STREAM,
+use super::config::{
+    RunIdentity, Schedule, TrainConfig, auto_values, resolve_auto, trained_env_steps,
 };
+use super::dir::{RunKind, check, lock, record_invocation};
+use super::protocol::{self, Observer, RunState, TEST_STREAM, TestSummary, VALIDATION_STREAM};
 use crate::batch_env::BatchEnvironment;
 use crate::hrl::{Agent, EpisodeTrace, EvalResult};
 
