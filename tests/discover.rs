@@ -154,3 +154,37 @@ fn a_killed_discovery_resumes_to_the_uninterrupted_result() {
     let resumed = summary(&args);
     assert_eq!(whole, resumed);
 }
+
+/// A discovery whose `π_g` has not learnt to reach its goals says so, with
+/// its success, and how to train it longer: stage 2 starts from it.
+#[test]
+fn a_discovery_whose_pi_g_has_not_learnt_warns() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let mut args = discover_args(&run);
+    args.retain(|a| a != "--json");
+    let rounds = args.iter().position(|a| a == "--rounds").unwrap() + 1;
+    args[rounds] = "1".into();
+    args.extend(["--gcp-iters", "5"].map(String::from));
+    let out = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
+        .args(&args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run worldgraph");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("discovery.json")).unwrap()).unwrap();
+    let success = summary["gcp_success_within_10"].as_f64().unwrap();
+    assert!(success < 0.5, "5 iterations trained pi_g to {success}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let expected = format!(
+        "warning: pi_g reaches {:.0}% of the goals within 10 steps",
+        100.0 * success
+    );
+    assert!(stderr.contains(&expected), "{stderr}");
+    assert!(stderr.contains("--gcp-iters"), "{stderr}");
+}

@@ -237,7 +237,31 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     } else {
         print_summary(&summary, run.dir());
     }
+    if let Some(w) = untrained_pi_g_warning(summary.gcp_success_within_10) {
+        eprintln!("{w}");
+    }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// `π_g`'s greedy success on goals within 10 steps below which it is
+/// taken not to have learnt: an untrained `π_g` reaches 16-19 % of them
+/// (docs/findings.md, "`π_g` on the medium and large mazes").
+const PI_G_LEARNT: f64 = 0.5;
+
+/// A warning when `π_g`, with greedy success `success` on goals within 10
+/// steps, has not learnt to reach them: stage 2 initialises its Worker
+/// and Manager from it (section 4.4) and steers stochastic traversals
+/// with it.
+fn untrained_pi_g_warning(success: f64) -> Option<String> {
+    (success < PI_G_LEARNT).then(|| {
+        format!(
+            "warning: pi_g reaches {:.0}% of the goals within 10 steps (an untrained pi_g reaches \
+             16-19%): it has not learnt to navigate, and stage 2 initialised from it starts with \
+             a Worker that rarely reaches its goals. Train it longer: --gcp-iters 400 (4x the \
+             default) takes it to 100% on the medium maze (docs/findings.md)",
+            100.0 * success
+        )
+    })
 }
 
 /// The discovery settings: the `--config` file's (or the defaults), each
