@@ -447,7 +447,7 @@ mod tests {
 
     #[test]
     fn the_own_kernels_give_the_tch_loss_and_gradients_on_a_simulator_rollout() {
-        for maze in [Maze::Small, Maze::Medium] {
+        for maze in [Maze::Small, Maze::Medium, Maze::Large] {
             let layout = maze.layout(false);
             let vs = nn::VarStore::new(tch::Device::Cpu);
             let net = default_net(&vs, 1, layout.width, layout.height);
