@@ -49,12 +49,12 @@ impl Write for SharedBuf {
 pub fn var_store_bytes(vs: &VarStore) -> Result<Vec<u8>, LearnerError> {
     let buf = SharedBuf::default();
     vs.save_to_stream(buf.clone())
-        .map_err(|e| error("(in memory)", first_line(&e.to_string())))?;
+        .map_err(|e| checkpoint_error("(in memory)", first_line(&e.to_string())))?;
     let bytes = std::mem::take(
         &mut *buf
             .0
             .lock()
-            .map_err(|_| error("(in memory)", "checkpoint buffer poisoned"))?,
+            .map_err(|_| checkpoint_error("(in memory)", "checkpoint buffer poisoned"))?,
     );
     Ok(bytes)
 }
@@ -78,24 +78,16 @@ pub fn named_tensors_of(
         .map_err(|e| checkpoint_error(source, e.to_string()))
 }
 
-/// A checkpoint error naming `source` and the cause `message`.
-pub fn checkpoint_error(source: &Path, message: String) -> LearnerError {
-    LearnerError::Checkpoint {
-        path: source.display().to_string(),
-        message,
-    }
-}
-
 /// Loads weights written by [`var_store_bytes`] into `vs` (same variable
 /// names; `path` only names the source in errors).
 pub fn load_var_store(vs: &mut VarStore, bytes: Vec<u8>, path: &Path) -> Result<(), LearnerError> {
     vs.load_from_stream(Cursor::new(bytes))
-        .map_err(|e| error(path, first_line(&e.to_string())))
+        .map_err(|e| checkpoint_error(path, first_line(&e.to_string())))
 }
 
 /// Reads `path` and loads it into `vs` ([`load_var_store`]).
 pub fn load_var_store_file(vs: &mut VarStore, path: &Path) -> Result<(), LearnerError> {
-    let bytes = std::fs::read(path).map_err(|e| error(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| checkpoint_error(path, e))?;
     load_var_store(vs, bytes, path)
 }
 
@@ -103,8 +95,8 @@ pub fn load_var_store_file(vs: &mut VarStore, path: &Path) -> Result<(), Learner
 /// `path` and the cause ("No space left on device").
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), LearnerError> {
     sim::atomic_file::write_atomic(path, bytes).map_err(|e| match e {
-        sim::SimError::Io { source, .. } => error(path, source),
-        other => error(path, other),
+        sim::SimError::Io { source, .. } => checkpoint_error(path, source),
+        other => checkpoint_error(path, other),
     })
 }
 
@@ -128,11 +120,11 @@ fn sibling(dir: &Path, suffix: &str) -> PathBuf {
 pub fn recover(dir: &Path) -> Result<(), LearnerError> {
     let (staging, old) = (sibling(dir, ".new"), sibling(dir, ".old"));
     if !dir.exists() && old.is_dir() {
-        std::fs::rename(&old, dir).map_err(|e| error(&old, e))?;
+        std::fs::rename(&old, dir).map_err(|e| checkpoint_error(&old, e))?;
     }
     for leftover in [staging, old] {
         if leftover.exists() {
-            std::fs::remove_dir_all(&leftover).map_err(|e| error(&leftover, e))?;
+            std::fs::remove_dir_all(&leftover).map_err(|e| checkpoint_error(&leftover, e))?;
         }
     }
     Ok(())
@@ -145,11 +137,13 @@ pub fn commit(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), LearnerError> {
     recover(dir)?;
     let (staging, old) = (sibling(dir, ".new"), sibling(dir, ".old"));
     let staged = (|| {
-        std::fs::create_dir_all(&staging).map_err(|e| error(&staging, e))?;
+        std::fs::create_dir_all(&staging).map_err(|e| checkpoint_error(&staging, e))?;
         for (name, bytes) in files {
             // Errors name the file as the user knows it: <dir>/<name>.
             write_file(&staging.join(name), bytes).map_err(|e| match e {
-                LearnerError::Checkpoint { message, .. } => error(dir.join(name), message),
+                LearnerError::Checkpoint { message, .. } => {
+                    checkpoint_error(dir.join(name), message)
+                }
                 other => other,
             })?;
         }
@@ -160,9 +154,9 @@ pub fn commit(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), LearnerError> {
         return Err(e);
     }
     if dir.exists() {
-        std::fs::rename(dir, &old).map_err(|e| error(dir, e))?;
+        std::fs::rename(dir, &old).map_err(|e| checkpoint_error(dir, e))?;
     }
-    std::fs::rename(&staging, dir).map_err(|e| error(dir, e))?;
+    std::fs::rename(&staging, dir).map_err(|e| checkpoint_error(dir, e))?;
     if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty())
         && let Ok(d) = std::fs::File::open(parent)
     {
@@ -192,7 +186,8 @@ fn tracing_debug(backtrace: &str) {
     }
 }
 
-fn error(path: impl AsRef<Path>, e: impl std::fmt::Display) -> LearnerError {
+/// A checkpoint error naming the file `path` and the cause `e`.
+pub fn checkpoint_error(path: impl AsRef<Path>, e: impl std::fmt::Display) -> LearnerError {
     LearnerError::Checkpoint {
         path: path.as_ref().display().to_string(),
         message: e.to_string(),

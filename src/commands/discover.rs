@@ -244,8 +244,8 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
 }
 
 /// `π_g`'s greedy success on goals within 10 steps below which it is
-/// taken not to have learnt: an untrained `π_g` reaches 16-19 % of them
-/// (docs/findings.md, "`π_g` on the medium and large mazes").
+/// taken not to have learnt (what an untrained `π_g` scores, and what a
+/// longer budget gives on each maze: `docs/findings.md`, stage 1).
 const PI_G_LEARNT: f64 = 0.5;
 
 /// A warning when `π_g`, with greedy success `success` on goals within 10
@@ -255,10 +255,10 @@ const PI_G_LEARNT: f64 = 0.5;
 fn untrained_pi_g_warning(success: f64) -> Option<String> {
     (success < PI_G_LEARNT).then(|| {
         format!(
-            "warning: pi_g reaches {:.0}% of the goals within 10 steps (an untrained pi_g reaches \
-             16-19%): it has not learnt to navigate, and stage 2 initialised from it starts with \
-             a Worker that rarely reaches its goals. Train it longer: --gcp-iters 400 (4x the \
-             default) takes it to 100% on the medium maze (docs/findings.md)",
+            "warning: pi_g reaches {:.0}% of the goals within 10 steps: it has not learnt to \
+             navigate, and stage 2 initialised from it starts with a Worker that rarely reaches \
+             its goals. Train it longer with --gcp-iters (docs/findings.md, stage 1, has what \
+             each maze needs)",
             100.0 * success
         )
     })

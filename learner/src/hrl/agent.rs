@@ -119,7 +119,7 @@ impl HrlAgent {
             cfg.envs,
             seed,
             &worker.learner.net,
-            Some(&manager.net),
+            &manager.net,
             traverser.pi_g(),
         );
         Ok(HrlAgent {
@@ -180,7 +180,7 @@ impl HrlAgent {
             n,
             seed,
             &self.worker.learner.net,
-            Some(&self.manager.net),
+            &self.manager.net,
             self.traverser.pi_g(),
         )
     }
@@ -218,15 +218,9 @@ impl HrlAgent {
         env: &mut dyn BatchEnvironment,
         segment: u64,
     ) -> Result<(), LearnerError> {
-        let n = self.check_batch(env)?;
-        env.step(&vec![action::RESET; n])?;
+        let n = reset_batch(self.cfg.envs, env)?;
         self.ctl = self.controller(n, sim::env_seed(self.seed ^ SEGMENT_SALT, segment));
         Ok(())
-    }
-
-    /// The batch's size, which must be the one the agent trains on.
-    pub(super) fn check_batch(&self, env: &dyn BatchEnvironment) -> Result<usize, LearnerError> {
-        check_batch(self.cfg.envs, env)
     }
 
     /// Where training time went since the last call.
@@ -308,6 +302,17 @@ impl HrlAgent {
         }
         Ok(())
     }
+}
+
+/// Starts a new episode in every environment of `env`, a batch of `envs`
+/// (the one an agent was built for); returns its size.
+pub(super) fn reset_batch(
+    envs: usize,
+    env: &mut dyn BatchEnvironment,
+) -> Result<usize, LearnerError> {
+    let n = check_batch(envs, env)?;
+    env.step(&vec![action::RESET; n])?;
+    Ok(n)
 }
 
 /// The size of `env`'s batch, which must be `envs`, the one an agent was

@@ -23,9 +23,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use shm_schemas::EnvMeta;
-use sim::{Layout, ReplayRng, RngState, Task, action};
+use sim::{Layout, ReplayRng, RngState, Task};
 
-use super::agent::{EVAL_SALT, SEGMENT_SALT};
+use super::agent::{EVAL_SALT, SEGMENT_SALT, check_batch, reset_batch};
 use super::config::{AgentConfig, AgentKind};
 use super::controller::{CoreStates, SavedController, VisitCounts, save_core_states};
 use super::reports::{
@@ -157,8 +157,7 @@ impl A2cAgent {
         env: &mut dyn BatchEnvironment,
         segment: u64,
     ) -> Result<(), LearnerError> {
-        let n = self.check_batch(env)?;
-        env.step(&vec![action::RESET; n])?;
+        let n = reset_batch(self.cfg.envs, env)?;
         self.carry = Carry::new(
             n,
             sim::env_seed(self.seed ^ SEGMENT_SALT, segment),
@@ -172,7 +171,7 @@ impl A2cAgent {
         &mut self,
         env: &mut dyn BatchEnvironment,
     ) -> Result<IterationStats, LearnerError> {
-        self.check_batch(env)?;
+        check_batch(self.cfg.envs, env)?;
         let mut carry = std::mem::replace(&mut self.carry, Carry::new(0, 0, &self.learner));
         self.learner.rollout.start(&carry.state);
         let mut counts = StepCounts::for_task(self.task);
@@ -257,11 +256,6 @@ impl A2cAgent {
         })
     }
 
-    /// The batch's size, which must be the one the agent trains on.
-    fn check_batch(&self, env: &dyn BatchEnvironment) -> Result<usize, LearnerError> {
-        super::agent::check_batch(self.cfg.envs, env)
-    }
-
     /// The training state — core state, action RNG, visit counts — as a
     /// record (JSON) and a tensor file, saved with a checkpoint so that a
     /// resumed run goes on exactly where it stopped.
@@ -270,10 +264,7 @@ impl A2cAgent {
             rng: self.carry.rng.state(),
             visits: self.carry.visits.clone(),
         };
-        let json = serde_json::to_vec(&record).map_err(|e| LearnerError::Checkpoint {
-            path: "controller".into(),
-            message: e.to_string(),
-        })?;
+        let json = serde_json::to_vec(&record).map_err(|e| checkpoint_error("controller", e))?;
         Ok(SavedController {
             record: json,
             tensors: save_core_states(&[("worker", Some(&self.carry.state))])?,

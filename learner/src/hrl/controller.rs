@@ -26,6 +26,7 @@ use super::traversal::Traversal;
 use super::worker::WorkerGoal;
 use crate::a2c::input::NO_GOAL;
 use crate::a2c::net::{ActorCritic, LstmState};
+use crate::checkpoint::checkpoint_error;
 use crate::error::LearnerError;
 use crate::gcp::GoalConditionedPolicy;
 
@@ -100,7 +101,7 @@ pub(super) struct Controller {
     /// The Worker's core state.
     pub(super) worker_state: LstmState,
     /// The Manager's core state.
-    pub(super) manager_state: Option<LstmState>,
+    pub(super) manager_state: LstmState,
     /// `π_g`'s core state while it steers traversals (with `π_g`).
     pub(super) steer_state: Option<LstmState>,
     /// Each environment's goals and traversal.
@@ -148,12 +149,12 @@ impl Controller {
         n: usize,
         seed: u64,
         worker: &ActorCritic,
-        manager: Option<&Manager>,
+        manager: &Manager,
         pi_g: Option<&GoalConditionedPolicy>,
     ) -> Controller {
         Controller {
             worker_state: worker.zero_state(n as i64),
-            manager_state: manager.map(|m| m.zero_state(n as i64)),
+            manager_state: manager.zero_state(n as i64),
             steer_state: pi_g.map(|g| g.network().zero_state(n as i64)),
             envs: vec![EnvCtl::fresh(); n],
             queues: (0..n)
@@ -161,7 +162,7 @@ impl Controller {
                     decisions: Vec::new(),
                 })
                 .collect(),
-            manager_init: manager.map(|m| m.zero_state(n as i64)),
+            manager_init: Some(manager.zero_state(n as i64)),
             rng: ReplayRng::seed_from_u64(seed),
             visits: VisitCounts::default(),
         }
@@ -209,9 +210,7 @@ impl Controller {
     /// Cuts the core states' graphs at the end of a training iteration.
     pub(super) fn detach(&mut self) {
         self.worker_state = self.worker_state.detach();
-        if let Some(s) = self.manager_state.as_mut() {
-            *s = s.detach();
-        }
+        self.manager_state = self.manager_state.detach();
         if let Some(s) = self.steer_state.as_mut() {
             *s = s.detach();
         }
@@ -225,13 +224,10 @@ impl Controller {
             rng: self.rng.state(),
             visits: self.visits.clone(),
         };
-        let json = serde_json::to_vec(&record).map_err(|e| LearnerError::Checkpoint {
-            path: "controller".into(),
-            message: e.to_string(),
-        })?;
+        let json = serde_json::to_vec(&record).map_err(|e| checkpoint_error("controller", e))?;
         let tensors = save_core_states(&[
             ("worker", Some(&self.worker_state)),
-            ("manager", self.manager_state.as_ref()),
+            ("manager", Some(&self.manager_state)),
             ("steer", self.steer_state.as_ref()),
             ("manager_init", self.manager_init.as_ref()),
         ])?;
@@ -252,10 +248,7 @@ impl Controller {
         source: &Path,
         envs: usize,
     ) -> Result<(), LearnerError> {
-        let bad = |message: String| LearnerError::Checkpoint {
-            path: source.display().to_string(),
-            message,
-        };
+        let bad = |message: String| checkpoint_error(source, message);
         let record: ControllerRecord =
             serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
         if record.envs.len() != envs
@@ -273,9 +266,10 @@ impl Controller {
         let worker = state("worker")?.ok_or_else(|| bad("no Worker core state".into()))?;
         let (manager, steer, manager_init) =
             (state("manager")?, state("steer")?, state("manager_init")?);
-        if manager.is_some() != self.manager_state.is_some()
-            || worker.h.size() != self.worker_state.h.size()
-        {
+        let Some(manager) = manager else {
+            return Err(bad("the controller is of another agent".into()));
+        };
+        if worker.h.size() != self.worker_state.h.size() {
             return Err(bad("the controller is of another agent".into()));
         }
         *self = Controller {

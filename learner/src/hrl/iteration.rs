@@ -23,7 +23,7 @@
 //! ([`HrlAgent::train_iteration`]); evaluation plays one episode per
 //! environment without recording ([`HrlAgent::evaluate`]).
 
-use super::agent::{EVAL_SALT, HrlAgent};
+use super::agent::{EVAL_SALT, HrlAgent, check_batch};
 use super::config::HandOver;
 use super::controller::Controller;
 use super::reports::{
@@ -335,7 +335,7 @@ impl HrlAgent {
         &mut self,
         env: &mut dyn BatchEnvironment,
     ) -> Result<IterationStats, LearnerError> {
-        self.check_batch(env)?;
+        check_batch(self.cfg.envs, env)?;
         let empty = self.controller(0, 0);
         let mut ctl = std::mem::replace(&mut self.ctl, empty);
         self.worker.learner.rollout.start(&ctl.worker_state);

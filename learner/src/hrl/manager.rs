@@ -242,25 +242,14 @@ impl ManagerSide {
         let (values, chooser) = if self.path == GradPath::RustCore {
             let own =
                 own_net.get_or_insert_with(|| OwnManager::new(&self.net, self.width, self.height));
-            let state = ctl
-                .manager_state
-                .as_mut()
-                .expect("a Manager has a core state");
+            let state = &mut ctl.manager_state;
             let decision = own_step(own, &input, state, &who, &resets);
             (decision.values.clone(), Chooser::Own { own, decision })
         } else {
-            let state = ctl
-                .manager_state
-                .as_ref()
-                .expect("a Manager has a core state")
-                .select(&idx)
-                .reset_done(&mask(&resets));
+            let state = ctl.manager_state.select(&idx).reset_done(&mask(&resets));
             let step = self.net.act(&input, &state);
             let bias = tch::no_grad(|| self.net.goal_bias(&input));
-            ctl.manager_state
-                .as_mut()
-                .expect("state")
-                .scatter(&idx, &step.state);
+            ctl.manager_state.scatter(&idx, &step.state);
             let chooser = Chooser::Tch {
                 head: self.net.head(),
                 h: step.h,
@@ -406,7 +395,7 @@ impl ManagerSide {
     /// Bootstraps the intervals of environments `cut`, which the episode's
     /// step limit cut, from the Manager's values of their final states.
     pub(super) fn bootstrap_cut(&self, ctl: &mut Controller, obs: &ObsView<'_>, cut: &[usize]) {
-        let state = ctl.manager_state.as_ref().expect("a Manager has a state");
+        let state = &ctl.manager_state;
         for (&e, v) in cut.iter().zip(self.net.final_values(obs, state, cut)) {
             if let Some(q) = ctl.queues[e].decisions.last_mut() {
                 q.final_value = Some(v);
