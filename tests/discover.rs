@@ -156,16 +156,21 @@ fn a_killed_discovery_resumes_to_the_uninterrupted_result() {
 }
 
 /// A discovery whose `π_g` has not learnt to reach its goals says so, with
-/// its success, and how to train it longer: stage 2 starts from it.
+/// its success, and the settings that train it: stage 2 starts from it.
+/// The settings file the warning names is one `discover` accepts (this run
+/// uses it, five iterations a round instead of its 400).
 #[test]
 fn a_discovery_whose_pi_g_has_not_learnt_warns() {
+    const REMEDY: &str = "experiments/discover-pi-g-curriculum.toml";
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let mut args = discover_args(&run);
     args.retain(|a| a != "--json");
     let rounds = args.iter().position(|a| a == "--rounds").unwrap() + 1;
     args[rounds] = "1".into();
-    args.extend(["--gcp-iters", "5"].map(String::from));
+    let remedy = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(REMEDY);
+    args.extend(["--gcp-iters", "5", "--config"].map(String::from));
+    args.push(remedy.display().to_string());
     let out = Command::new(env!("CARGO_BIN_EXE_worldgraph"))
         .args(&args)
         .stdin(Stdio::null())
@@ -186,5 +191,7 @@ fn a_discovery_whose_pi_g_has_not_learnt_warns() {
         100.0 * success
     );
     assert!(stderr.contains(&expected), "{stderr}");
-    assert!(stderr.contains("--gcp-iters"), "{stderr}");
+    assert!(stderr.contains(REMEDY), "{stderr}");
+    let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert!(config.contains("goal_walk_len = 2"), "{config}");
 }

@@ -257,8 +257,9 @@ fn untrained_pi_g_warning(success: f64) -> Option<String> {
         format!(
             "warning: pi_g reaches {:.0}% of the goals within 10 steps: it has not learnt to \
              navigate, and stage 2 initialised from it starts with a Worker that rarely reaches \
-             its goals. Train it longer with --gcp-iters (docs/findings.md, stage 1, has what \
-             each maze needs)",
+             its goals. Start its goals near and train it longer (--config \
+             experiments/discover-pi-g-curriculum.toml; docs/findings.md, stage 1, has what each \
+             maze needs)",
             100.0 * success
         )
     })
