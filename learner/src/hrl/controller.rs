@@ -266,12 +266,9 @@ impl Controller {
         let worker = state("worker")?.ok_or_else(|| bad("no Worker core state".into()))?;
         let (manager, steer, manager_init) =
             (state("manager")?, state("steer")?, state("manager_init")?);
-        let Some(manager) = manager else {
-            return Err(bad("the controller is of another agent".into()));
-        };
-        if worker.h.size() != self.worker_state.h.size() {
-            return Err(bad("the controller is of another agent".into()));
-        }
+        let manager = manager
+            .filter(|_| worker.h.size() == self.worker_state.h.size())
+            .ok_or_else(|| bad("the controller is of another agent".into()))?;
         *self = Controller {
             worker_state: worker,
             manager_state: manager,
