@@ -193,11 +193,7 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
 /// another name or folder, are refused naming both files: each would count
 /// as a seed of its cell.
 pub fn read_all_runs(root: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf>)> {
-    let mut files = Vec::new();
-    let mut nested = Vec::new();
-    collect(root, true, &mut files, &mut nested)?;
-    files.sort();
-    nested.sort();
+    let (files, nested) = summary_files(root)?;
     let mut seen: std::collections::BTreeMap<(String, String, String, u64), &Path> =
         std::collections::BTreeMap::new();
     let mut runs = Vec::new();
@@ -224,6 +220,40 @@ pub fn read_all_runs(root: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf
     Ok((runs, nested))
 }
 
+/// Every world graph discovery summary of the result set `root`
+/// (`<maze>/discover/seed-<n>.json`; the sets nested under it are not
+/// read), sorted by path.
+pub fn read_all_discoveries(root: &Path) -> anyhow::Result<Vec<DiscoverResult>> {
+    let (files, _) = summary_files(root)?;
+    files
+        .iter()
+        .filter(|p| p.parent().and_then(|d| d.file_name()) == Some("discover".as_ref()))
+        .map(|p| {
+            let bytes = std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?;
+            let r: DiscoverResult = serde_json::from_slice(&bytes)
+                .with_context(|| format!("{} is not a discovery summary", p.display()))?;
+            anyhow::ensure!(
+                r.schema == RESULT_SCHEMA,
+                "{} has summary schema {}, this build reads {RESULT_SCHEMA}",
+                p.display(),
+                r.schema
+            );
+            Ok(r)
+        })
+        .collect()
+}
+
+/// The summary files under `root` and the result sets nested under it,
+/// each sorted by path.
+fn summary_files(root: &Path) -> anyhow::Result<(Vec<PathBuf>, Vec<PathBuf>)> {
+    let mut files = Vec::new();
+    let mut nested = Vec::new();
+    collect(root, true, &mut files, &mut nested)?;
+    files.sort();
+    nested.sort();
+    Ok((files, nested))
+}
+
 fn collect(
     dir: &Path,
     root: bool,
@@ -238,6 +268,11 @@ fn collect(
         std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
     for e in entries {
         let p = e?.path();
+        if root && p.ends_with("runs") {
+            // The grid runner's working directory (`experiment`'s default
+            // `--work`: checkpoints and logs, no summaries).
+            continue;
+        }
         if p.is_dir() {
             collect(&p, false, out, nested)?;
         } else if p

@@ -212,6 +212,37 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
     assert!(md.contains(&a2c_cell), "{a2c_cell} not in\n{md}");
     assert!(md.contains("| FN | — | Fail |"), "{md}");
     assert!(md.contains("| small | 3840 | 1920 | 2 |"), "{md}");
+    // `--no-figures`: the same tables, no figure drawn or linked.
+    ok(&worldgraph(d, &["table", "results", "--no-figures"]));
+    let text_only = std::fs::read_to_string(d.join("results/README.md")).unwrap();
+    assert!(text_only.contains(&a2c_cell), "{text_only}");
+    assert!(
+        text_only.contains("## Time to score") && !text_only.contains(".png"),
+        "{text_only}"
+    );
+    assert!(!d.join("results/figures").exists());
+    // The set's discovery, with what `discover` measured of it.
+    let pivotal = disc["summary"]["pivotal_states"].as_u64().unwrap();
+    let row = format!("| small | 0 | 1 | {pivotal} | ");
+    assert!(
+        text_only.contains("## World graph discoveries") && text_only.contains(&row),
+        "{row} not in\n{text_only}"
+    );
+    // A set of discoveries alone (`--discoveries-only`) gets the same
+    // section as its README, not a refusal.
+    let only = d.join("discovered/small/discover");
+    std::fs::create_dir_all(&only).unwrap();
+    std::fs::copy(
+        d.join("results/small/discover/seed-0.json"),
+        only.join("seed-0.json"),
+    )
+    .unwrap();
+    ok(&worldgraph(d, &["table", "discovered"]));
+    let md_only = std::fs::read_to_string(d.join("discovered/README.md")).unwrap();
+    assert!(
+        md_only.contains("from the 1 discovery summaries") && md_only.contains(&row),
+        "{md_only}"
+    );
     // Without --out, the tables are the result set's README, its figures
     // beside it: the set is one folder.
     ok(&worldgraph(d, &["table", "results"]));
@@ -524,7 +555,7 @@ fn table_refuses_a_summary_counted_twice_and_an_out_that_is_a_directory() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let committed = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("results/stage2/small/multigoal/a2c/seed-0.json");
+        .join("results/archive/stage2/small/multigoal/a2c/seed-0.json");
     let cell = d.join("results/small/multigoal/a2c");
     std::fs::create_dir_all(&cell).unwrap();
     std::fs::copy(&committed, cell.join("seed-0.json")).unwrap();

@@ -269,15 +269,14 @@ fn repeats(reference: &[RunResult], grid_a2c: &[&RunResult]) -> (usize, usize) {
 /// The time-to-score section: its table, a row per configuration of each
 /// maze and task of `pairs` (the threshold `share` of the best cell's
 /// score there), the notes on where each reference row came from, and one
-/// reach-share figure per maze and task (written into `figures`, linked as
-/// `fig_link`).
+/// reach-share figure per maze and task (written into `figures`, none
+/// without it).
 pub(super) fn section(
     cells: &Cells,
     pairs: &[(String, String)],
     share: f64,
     reference: Option<&Reference>,
-    figures: &Path,
-    fig_link: &str,
+    figures: Option<&super::Figures>,
 ) -> anyhow::Result<String> {
     let mut tts = intro(share, reference.is_some());
     let mut notes = Vec::new();
@@ -293,16 +292,21 @@ pub(super) fn section(
         let mut here = configurations(cells, m, t);
         let chosen = reference_row(cells, m, t, threshold, longer, &mut here, &mut notes);
         let reach_series = rows(&mut tts, m, t, threshold, &here, chosen.name.as_ref());
-        reach_chart(figures, m, t, threshold, reach_series, chosen.longer_used)?;
+        if let Some(f) = figures {
+            reach_chart(&f.dir, m, t, threshold, reach_series, chosen.longer_used)?;
+        }
     }
     let _ = writeln!(tts);
     for n in &notes {
         let _ = writeln!(tts, "{n}\n");
     }
-    for (m, t) in pairs {
+    for (f, (m, t)) in figures
+        .iter()
+        .flat_map(|f| pairs.iter().map(move |p| (f, p)))
+    {
         let file = format!("time-to-score-{m}-{t}.png");
-        if figures.join(&file).exists() {
-            let _ = writeln!(tts, "![time to score, {m} {t}]({fig_link}/{file})");
+        if f.dir.join(&file).exists() {
+            let _ = writeln!(tts, "![time to score, {m} {t}]({}/{file})", f.link);
         }
     }
     let _ = writeln!(tts);
