@@ -98,6 +98,31 @@ pub struct RunResult {
     /// only on the same path ([`grad_path_before_recorded`] where absent).
     #[serde(default = "grad_path_before_recorded")]
     pub grad_path: String,
+    /// The CPU it ran on ([`cpu_model`]): libtorch's MKL and the own
+    /// kernels' GEMM choose their kernels and blocking by CPU, so the same
+    /// commit, seed and gradient path give the same floats only on the same
+    /// CPU model ([`cpu_before_recorded`] where absent).
+    #[serde(default = "cpu_before_recorded")]
+    pub cpu: String,
+}
+
+/// The CPU of a summary written before summaries recorded it.
+pub fn cpu_before_recorded() -> String {
+    "unrecorded".to_string()
+}
+
+/// This machine's CPU model (`model name` of `/proc/cpuinfo`; `unknown`
+/// where there is none).
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find_map(|l| l.strip_prefix("model name"))
+                .and_then(|rest| rest.split_once(':'))
+                .map(|(_, name)| name.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".to_string())
 }
 
 /// The gradient path of a summary written before summaries recorded it:
@@ -132,6 +157,9 @@ pub struct DiscoverResult {
     /// The gradient path `π_g` trained on ([`RunResult::grad_path`]).
     #[serde(default = "grad_path_before_recorded")]
     pub grad_path: String,
+    /// The CPU it ran on ([`RunResult::cpu`]).
+    #[serde(default = "cpu_before_recorded")]
+    pub cpu: String,
 }
 
 /// `results/<maze>/<task>/<config>/seed-<n>.json`.

@@ -175,6 +175,36 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         ],
     ));
     assert!(err.contains("differs"), "{err}");
+    // Every summary records the CPU it ran on (floats differ from one CPU
+    // model to another); a summary from another CPU that does not reproduce
+    // says so.
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|i| {
+            i.lines()
+                .find_map(|l| l.strip_prefix("model name"))
+                .and_then(|r| r.split_once(':'))
+                .map(|(_, n)| n.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".to_string());
+    assert_eq!(a2c["cpu"], cpu.as_str());
+    assert_eq!(disc["cpu"], cpu.as_str());
+    bad["cpu"] = serde_json::json!("Another CPU");
+    std::fs::write(d.join("elsewhere.json"), serde_json::to_vec(&bad).unwrap()).unwrap();
+    let err = refused(&worldgraph(
+        d,
+        &[
+            "experiment",
+            "--reproduce",
+            "elsewhere.json",
+            "--work",
+            "elsewhere",
+        ],
+    ));
+    assert!(
+        err.contains("made on another CPU (Another CPU") && err.contains(&cpu),
+        "{err}"
+    );
     // The summaries record the production gradient path; one made on a path
     // this version retired names the commit it reproduces on, and starts
     // nothing.

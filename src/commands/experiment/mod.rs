@@ -39,7 +39,7 @@ pub use self::grid::Grid;
 use self::grid::train_args;
 pub use self::slurm::SbatchArgs;
 use crate::results::{
-    CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, build_commit,
+    CurvePoint, DiscoverResult, DiscoverSpec, RESULT_SCHEMA, RunResult, build_commit, cpu_model,
     discover_path, read_run, run_path,
 };
 
@@ -385,6 +385,7 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
                     .grad_path
                     .name()
                     .to_string(),
+                cpu: cpu_model(),
             };
             let path = discover_path(&plan.results, &spec.maze, spec.seed);
             write_result(&path, &serde_json::to_vec_pretty(&r)?)
@@ -477,6 +478,7 @@ fn run_result(
         jobs: plan.jobs,
         commit: plan.commit.clone(),
         grad_path,
+        cpu: cpu_model(),
     }
 }
 

@@ -14,7 +14,7 @@ use super::grid::{Grid, MazeBudget};
 use super::{
     ExperimentArgs, Job, Plan, discover_command, discovery_done, start, tail, train_command,
 };
-use crate::results::{RunResult, build_commit, read_run};
+use crate::results::{RunResult, build_commit, cpu_model, read_run};
 
 /// `--reproduce`: reruns one recorded run in a scratch working directory.
 pub(super) fn reproduce(
@@ -56,7 +56,12 @@ pub(super) fn reproduce(
     )?;
     // The summary's training config carries its gradient path
     // (`agent.grad_path`).
-    eprintln!("reproduce: on the gradient path {}", r.grad_path);
+    eprintln!(
+        "reproduce: on the gradient path {}; recorded on the CPU {}, rerun on {}",
+        r.grad_path,
+        r.cpu,
+        cpu_model()
+    );
     wait_ok(
         start(cmd, &plan.log_path(&job), plan.threads)?,
         &plan.log_path(&job),
@@ -67,9 +72,19 @@ pub(super) fn reproduce(
         "recorded test score {:.6} (commit {}), reproduced {:.6} (commit {})",
         r.test_score, r.commit, t.test_score, plan.commit
     );
+    let cpu = cpu_model();
     if t.test_score == r.test_score {
         println!("reproduced: the same test score");
         Ok(std::process::ExitCode::SUCCESS)
+    } else if r.cpu != cpu {
+        eprintln!(
+            "error: the rerun's test score differs from the summary's, which was made on another \
+             CPU ({}; this one: {cpu}). libtorch's MKL and the own kernels' GEMM choose their \
+             kernels and blocking by CPU, so floats, and the agent trained on them, differ from \
+             one CPU model to another: rerun on a machine with the summary's CPU",
+            r.cpu
+        );
+        Ok(std::process::ExitCode::FAILURE)
     } else {
         eprintln!("error: the rerun's test score differs from the summary's");
         Ok(std::process::ExitCode::FAILURE)
