@@ -159,6 +159,35 @@ fn world(a: &DiscoverArgs, seed: u64) -> WorldArgs {
 /// `train` and `discover` keep in process too.
 const MAX_ENVS: usize = shm_schemas::MAX_ENVS;
 
+/// Opens the discovery run of `a` (`--run`, or `runs/discover-<maze>-<seed>`):
+/// new, or resumed ([`DiscoveryRun::open`] checks that it is the same run).
+fn open_run(
+    a: &DiscoverArgs,
+    layout: &Layout,
+    cfg: DiscoveryConfig,
+    num_actions: usize,
+) -> anyhow::Result<DiscoveryRun> {
+    let dir = a.run_dir.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, cfg.seed))
+    });
+    // The --config file may sit in the run directory: it is the run's own.
+    let own_files: Vec<String> = a
+        .config
+        .as_deref()
+        .and_then(|c| dir::name_in(&dir, c))
+        .into_iter()
+        .chain(["lock".to_string()])
+        .collect();
+    DiscoveryRun::open(DiscoverySpec {
+        dir,
+        layout: layout.clone(),
+        envs: a.envs,
+        config: cfg,
+        num_actions,
+        own_files,
+    })
+}
+
 /// Runs `worldgraph discover`.
 pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     let cfg = resolved_config(&a)?;
@@ -174,24 +203,7 @@ pub fn run(a: DiscoverArgs) -> anyhow::Result<std::process::ExitCode> {
     // maze's structure, doors passable and no key (a Door-Key layout's
     // door is refused at run time only while it is closed).
     let layout = layout.structural();
-    let dir = a.run_dir.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("discover-{}-{}", layout.name, seed))
-    });
-    let own_files: Vec<String> = a
-        .config
-        .as_deref()
-        .and_then(|c| dir::name_in(&dir, c))
-        .into_iter()
-        .chain(["lock".to_string()])
-        .collect();
-    let mut run = DiscoveryRun::open(DiscoverySpec {
-        dir,
-        layout: layout.clone(),
-        envs: a.envs,
-        config: cfg,
-        num_actions: env_cfg.task.num_actions(),
-        own_files,
-    })?;
+    let mut run = open_run(&a, &layout, cfg, env_cfg.task.num_actions())?;
     if let Some(rounds) = run.resumed_after() {
         eprintln!(
             "discover: resuming {} after round {rounds}",
