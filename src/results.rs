@@ -203,12 +203,7 @@ pub fn read_run(path: &Path) -> anyhow::Result<RunResult> {
     }
     let r: RunResult = serde_json::from_value(v)
         .with_context(|| format!("{} is not a run summary", path.display()))?;
-    anyhow::ensure!(
-        r.schema == RESULT_SCHEMA,
-        "{} has summary schema {}, this build reads {RESULT_SCHEMA}",
-        path.display(),
-        r.schema
-    );
+    check_schema(path, r.schema)?;
     Ok(r)
 }
 
@@ -260,15 +255,21 @@ pub fn read_all_discoveries(root: &Path) -> anyhow::Result<Vec<DiscoverResult>> 
             let bytes = std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?;
             let r: DiscoverResult = serde_json::from_slice(&bytes)
                 .with_context(|| format!("{} is not a discovery summary", p.display()))?;
-            anyhow::ensure!(
-                r.schema == RESULT_SCHEMA,
-                "{} has summary schema {}, this build reads {RESULT_SCHEMA}",
-                p.display(),
-                r.schema
-            );
+            check_schema(p, r.schema)?;
             Ok(r)
         })
         .collect()
+}
+
+/// Refuses a summary at `path` written in another format than this
+/// build's ([`RESULT_SCHEMA`]).
+fn check_schema(path: &Path, schema: u32) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        schema == RESULT_SCHEMA,
+        "{} has summary schema {schema}, this build reads {RESULT_SCHEMA}",
+        path.display()
+    );
+    Ok(())
 }
 
 /// The summary files under `root` and the result sets nested under it,

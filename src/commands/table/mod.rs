@@ -100,8 +100,8 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         out.display(),
         out.display()
     );
-    let (runs, nested) = read_result_set(&a.results)?;
     let discovered = read_all_discoveries(&a.results)?;
+    let (runs, nested) = read_result_set(&a.results, !discovered.is_empty())?;
     if runs.is_empty() {
         return discoveries_only(&a, &out, &discovered);
     }
@@ -155,8 +155,11 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
 
 /// The run summaries of the result set `results` and the result sets below
 /// it, which are not read (each is named on stderr); an error when there
-/// is no summary to read.
-fn read_result_set(results: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf>)> {
+/// is no summary to read, of a run or (`has_discoveries`) of a discovery.
+fn read_result_set(
+    results: &Path,
+    has_discoveries: bool,
+) -> anyhow::Result<(Vec<RunResult>, Vec<PathBuf>)> {
     let (runs, nested) = read_all_runs(results)?;
     for n in &nested {
         eprintln!(
@@ -166,7 +169,7 @@ fn read_result_set(results: &Path) -> anyhow::Result<(Vec<RunResult>, Vec<PathBu
         );
     }
     anyhow::ensure!(
-        !runs.is_empty() || !read_all_discoveries(results)?.is_empty(),
+        !runs.is_empty() || has_discoveries,
         "no run summaries under {} (`worldgraph experiment GRID.toml` writes them){}",
         results.display(),
         if nested.is_empty() {

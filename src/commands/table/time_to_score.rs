@@ -300,13 +300,12 @@ pub(super) fn section(
     for n in &notes {
         let _ = writeln!(tts, "{n}\n");
     }
-    for (f, (m, t)) in figures
-        .iter()
-        .flat_map(|f| pairs.iter().map(move |p| (f, p)))
-    {
-        let file = format!("time-to-score-{m}-{t}.png");
-        if f.dir.join(&file).exists() {
-            let _ = writeln!(tts, "![time to score, {m} {t}]({}/{file})", f.link);
+    if let Some(f) = figures {
+        for (m, t) in pairs {
+            let file = format!("time-to-score-{m}-{t}.png");
+            if f.dir.join(&file).exists() {
+                let _ = writeln!(tts, "![time to score, {m} {t}]({}/{file})", f.link);
+            }
         }
     }
     let _ = writeln!(tts);
