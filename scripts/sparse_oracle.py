@@ -114,6 +114,8 @@ def main():
         f"oracle (gamma {a.gamma}): mean score {total / n:.3f}, balls {balls_total / n:.2f}, "
         f"steps {steps_total / n:.1f} over {n} spawns of {a.balls} balls"
     )
+    direct = to_exit(s0)
+    print(f"exit at once (no ball): {direct} steps, score {-STEP_PENALTY * direct:.3f}")
 
 
 if __name__ == "__main__":

@@ -847,3 +847,128 @@ fn table_2_shows_the_flat_a2c_on_door_key() {
         "the full method beside the paper's: {small}"
     );
 }
+
+/// Issues 47 and 48: `docs/results.md` is one page from several result
+/// sets (`table A --with B`). A block (maze, task) comes whole from the
+/// last set that holds it, so the paper's grid keeps its MultiGoal rows
+/// while its pre-fix Door-Key rows (every one 0 %) give way to the fixed
+/// grid's, the page says which set gave which block, no set's own
+/// `scores.csv` is overwritten, and two budgets in one maze are refused.
+/// On the committed summaries of `paper-real` and `doorkey-fixed`.
+#[test]
+fn one_page_from_several_result_sets_takes_each_block_from_the_last_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let copy = |from: &str, to: &str| {
+        let to = d.join(to);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(repo.join(from), &to).unwrap();
+    };
+    for seed in 0..3 {
+        for (task, config) in [
+            ("doorkey", "wn-pivotal-trav-init"),
+            ("doorkey", "wn-random-init"),
+            ("multigoal", "wn-pivotal-trav-init"),
+        ] {
+            let p = format!("small/{task}/{config}/seed-{seed}.json");
+            copy(&format!("results/paper-real/{p}"), &format!("old/{p}"));
+        }
+        let p = format!("small/doorkey/wn-pivotal-trav-init/seed-{seed}.json");
+        copy(&format!("results/doorkey-fixed/{p}"), &format!("fixed/{p}"));
+    }
+    let table = |with: &str| {
+        worldgraph(
+            d,
+            &[
+                "table",
+                "old",
+                "--with",
+                with,
+                "--out",
+                "out/results.md",
+                "--no-figures",
+            ],
+        )
+    };
+    ok(&table("fixed"));
+    let md = std::fs::read_to_string(d.join("out/results.md")).unwrap();
+    let section = |name: &str| {
+        md.split(&format!("## {name}"))
+            .nth(1)
+            .unwrap_or_else(|| panic!("no {name} section in\n{md}"))
+            .split("\n## ")
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    // The Door-Key block is the fixed grid's: its full method (100 % on
+    // the three seeds), and none of the old grid's Door-Key rows, not even
+    // the one the fixed set does not hold.
+    let score = |p: &Path| json(p)["test_score"].as_f64().unwrap();
+    let fixed: Vec<f64> = (0..3)
+        .map(|s| {
+            score(&d.join(format!(
+                "fixed/small/doorkey/wn-pivotal-trav-init/seed-{s}.json"
+            )))
+        })
+        .collect();
+    let mean = 100.0 * fixed.iter().sum::<f64>() / 3.0;
+    let small = section("Table 2")
+        .lines()
+        .find(|l| l.starts_with("| small"))
+        .expect("a small row of Table 2")
+        .to_string();
+    let cells: Vec<&str> = small.split('|').map(str::trim).collect();
+    assert!(
+        cells
+            .iter()
+            .any(|c| c.starts_with(&format!("{mean:.0} ± "))),
+        "the fixed grid's full method ({mean:.0} %) in {small}"
+    );
+    assert!(
+        !small.contains("0 ± 0 |") && cells.iter().filter(|c| **c == "—").count() >= 6,
+        "no pre-fix Door-Key row left in {small}"
+    );
+    // The MultiGoal block is still the old grid's.
+    let mg: Vec<f64> = (0..3)
+        .map(|s| {
+            score(&d.join(format!(
+                "old/small/multigoal/wn-pivotal-trav-init/seed-{s}.json"
+            )))
+        })
+        .collect();
+    let mg_mean = mg.iter().sum::<f64>() / 3.0;
+    assert!(
+        section("Table 1").contains(&format!("{mg_mean:.3} ± ")),
+        "the old grid's MultiGoal cell ({mg_mean:.3}) in\n{md}"
+    );
+    // The page names each set's share, and the command that made it.
+    let sets = section("Result sets");
+    assert!(
+        sets.contains("| `old` | small: multigoal | 3 |")
+            && sets.contains("| `fixed` | small: doorkey | 3 |"),
+        "{sets}"
+    );
+    assert!(
+        md.contains("`worldgraph table old --with fixed --out out/results.md`"),
+        "{md}"
+    );
+    // The merged rows go beside the page; no set's scores.csv is written.
+    let csv = std::fs::read_to_string(d.join("out/results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 6, "{csv}");
+    assert!(!d.join("old/scores.csv").exists() && !d.join("fixed/scores.csv").exists());
+
+    // A set whose runs of the small maze had another budget is refused:
+    // the flat A2C to 9M env steps beside the 3M grid.
+    let p = "small/multigoal/a2c/seed-0.json";
+    copy(&format!("results/a2c-plateau/{p}"), &format!("longer/{p}"));
+    let err = refused(&table("longer"));
+    assert!(
+        err.contains("small maze would mix budgets") && err.contains("longer"),
+        "{err}"
+    );
+    // And --with needs --out: the page is no one set's README.
+    let err = refused(&worldgraph(d, &["table", "old", "--with", "fixed"]));
+    assert!(err.contains("--out"), "{err}");
+}

@@ -4,7 +4,7 @@
 //! each configuration took to reach a score, and validation curves like
 //! the paper's Figure 4 (mean and spread over seeds), into the result
 //! set's own `README.md` with its figures in `figures/` beside it
-//! (`--out` elsewhere).
+//! (`--out` elsewhere); or one page from several sets (`--with`).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
@@ -20,6 +20,7 @@ mod budgets;
 mod curves;
 mod discoveries;
 mod paper;
+mod sets;
 mod tables;
 mod time_to_score;
 
@@ -64,9 +65,20 @@ pub struct TableArgs {
     pub reference: Vec<PathBuf>,
     /// The tidy per-run CSV written (one row per run: maze, task, config,
     /// seed, test score, budget, wall time, commit ...) [default:
-    /// `scores.csv` in the results directory].
+    /// `scores.csv` in the results directory; with --with, the --out file
+    /// with `.csv` for `.md`].
     #[arg(long)]
     pub scores: Option<PathBuf>,
+    /// Another result set on the same page, read after RESULTS and the
+    /// --with sets before it: each maze and task it holds (a block of
+    /// rows) replaces that block of the sets before it whole, so a block's
+    /// rows share one grid, budget and version of the code (e.g. the
+    /// paper's grid with the Door-Key blocks a later grid re-ran:
+    /// `table results/paper-real --with results/doorkey-fixed --out
+    /// docs/results.md`). The page lists what each set gives. Refused when
+    /// a maze would mix two sets' budgets. Repeatable; needs --out.
+    #[arg(long = "with", value_name = "DIR", requires = "out")]
+    pub with: Vec<PathBuf>,
 }
 
 /// Where the figures are saved (`dir`) and how the README links them
@@ -100,8 +112,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         out.display(),
         out.display()
     );
-    let discovered = read_all_discoveries(&a.results)?;
-    let (runs, nested) = read_result_set(&a.results, !discovered.is_empty())?;
+    let (runs, nested, discovered, shares) = read_sets(&a)?;
     if runs.is_empty() {
         return discoveries_only(&a, &out, &discovered);
     }
@@ -125,6 +136,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         &a,
         &runs,
         &nested,
+        &shares,
         &cells,
         reference.as_ref(),
         figures.as_ref(),
@@ -134,7 +146,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     let scores = a
         .scores
         .clone()
-        .unwrap_or_else(|| a.results.join("scores.csv"));
+        .unwrap_or_else(|| sets::default_scores(&a.results, &out, !a.with.is_empty()));
     write_atomic(
         &scores,
         super::aggregate::scores_csv(&runs, PAPER_ITERATIONS).as_bytes(),
@@ -151,6 +163,42 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         scores.display()
     );
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// The runs, the result sets below those named (not read), the discoveries
+/// and, with `--with`, what each set gives the page (empty without).
+type Sets = (
+    Vec<RunResult>,
+    Vec<PathBuf>,
+    Vec<DiscoverResult>,
+    Vec<sets::SetShare>,
+);
+
+/// Reads `a.results` and the `--with` sets, merged block by block.
+fn read_sets(a: &TableArgs) -> anyhow::Result<Sets> {
+    let mut all = Vec::new();
+    let mut nested = Vec::new();
+    let mut discovered = Vec::new();
+    for dir in std::iter::once(&a.results).chain(&a.with) {
+        let d = read_all_discoveries(dir)?;
+        let (runs, n) = read_result_set(dir, !d.is_empty())?;
+        discovered.push(d);
+        nested.extend(n);
+        all.push((dir.clone(), runs));
+    }
+    if a.with.is_empty() {
+        let (_, runs) = all.pop().expect("one set");
+        let d = discovered.pop().expect("one set");
+        return Ok((runs, nested, d, Vec::new()));
+    }
+    let (runs, shares) = sets::merge(all)?;
+    for s in shares.iter().filter(|s| s.runs == 0) {
+        eprintln!(
+            "table: every block of {} is replaced by a later --with set; none of its runs is on the page",
+            s.dir.display()
+        );
+    }
+    Ok((runs, nested, sets::merge_discoveries(discovered), shares))
 }
 
 /// The run summaries of the result set `results` and the result sets below
@@ -248,10 +296,12 @@ fn cells_of(runs: &[RunResult]) -> Cells<'_> {
 /// and 2 (section 5), the rliable aggregates, the budget per cell, and the
 /// validation curves (the paper's Figure 4, then every configuration's),
 /// whose figures are saved into `figures` (none without it).
+#[allow(clippy::too_many_arguments)]
 fn readme(
     a: &TableArgs,
     runs: &[RunResult],
     nested: &[PathBuf],
+    shares: &[sets::SetShare],
     cells: &Cells,
     reference: Option<&time_to_score::Reference>,
     figures: Option<&Figures>,
@@ -267,6 +317,9 @@ fn readme(
         .collect();
     pairs.dedup();
     let mut md = preamble(a, runs, nested);
+    if !shares.is_empty() {
+        md.push_str(&sets::section(shares));
+    }
     md.push_str(&budgets::section(runs, &mazes));
     md.push_str(&time_to_score::section(
         cells,
@@ -310,15 +363,32 @@ fn preamble(a: &TableArgs, runs: &[RunResult], nested: &[PathBuf]) -> String {
     let _ = writeln!(
         md,
         "# Results: the paper's Tables 1 and 2 on this machine\n\n\
-         Generated by `worldgraph table {}{}` from the {} run summaries under `{}/` \
+         Generated by `worldgraph table {}{}{}` from the {} run summaries {} \
          (written by `worldgraph experiment`, grids in `experiments/`); do not edit by hand.\n",
         a.results.display(),
+        a.with
+            .iter()
+            .map(|r| format!(" --with {}", r.display()))
+            .chain(
+                a.out
+                    .iter()
+                    .filter(|_| !a.with.is_empty())
+                    .map(|o| format!(" --out {}", o.display()))
+            )
+            .collect::<String>(),
         a.reference
             .iter()
             .map(|r| format!(" --reference {}", r.display()))
             .collect::<String>(),
         runs.len(),
-        a.results.display().to_string().trim_end_matches('/')
+        if a.with.is_empty() {
+            format!(
+                "under `{}/`",
+                a.results.display().to_string().trim_end_matches('/')
+            )
+        } else {
+            "of the result sets below".to_string()
+        }
     );
     if !nested.is_empty() {
         let _ = writeln!(
