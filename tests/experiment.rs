@@ -42,6 +42,14 @@ fn grid(name: &str, env_steps: u64, configs: &str) -> String {
     )
 }
 
+/// Copies the committed file `from` (relative to the repository) to `to`
+/// (relative to the test's directory `d`), making its folders.
+fn copy_committed(d: &Path, from: &str, to: &str) {
+    let to = d.join(to);
+    std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join(from), &to).unwrap();
+}
+
 fn json(p: &Path) -> serde_json::Value {
     serde_json::from_str(
         &std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
@@ -651,12 +659,7 @@ fn table_refuses_a_summary_counted_twice_and_an_out_that_is_a_directory() {
 fn time_to_score_takes_a_longer_a2c_as_reference_and_bounds_censored_seeds() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let copy = |from: &str, to: &str| {
-        let to = d.join(to);
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(repo.join(from), &to).unwrap();
-    };
+    let copy = |from: &str, to: &str| copy_committed(d, from, to);
     for seed in [0, 1] {
         for config in ["a2c", "wn-pivotal-init"] {
             let p = format!("small/multigoal/{config}/seed-{seed}.json");
@@ -859,12 +862,7 @@ fn table_2_shows_the_flat_a2c_on_door_key() {
 fn one_page_from_several_result_sets_takes_each_block_from_the_last_set() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let copy = |from: &str, to: &str| {
-        let to = d.join(to);
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(repo.join(from), &to).unwrap();
-    };
+    let copy = |from: &str, to: &str| copy_committed(d, from, to);
     for seed in 0..3 {
         for (task, config) in [
             ("doorkey", "wn-pivotal-trav-init"),
