@@ -220,7 +220,14 @@ impl A2cAgent {
             (rewards[e], dones[e]) = task_step(m);
             if train && self.cfg.count_bonus > 0.0 {
                 let cells = obs.env_cells(e).len();
-                rewards[e] += carry.visits.bonus(e, n, cell, cells, self.cfg.count_bonus);
+                rewards[e] += carry.visits.bonus(
+                    e,
+                    n,
+                    cell,
+                    cells,
+                    self.cfg.count_bonus,
+                    self.cfg.count_bonus_fade,
+                );
             }
             if m.truncated() {
                 cut.push(e);

@@ -180,6 +180,13 @@ pub struct AgentConfig {
     /// as the maze is covered, so the task's optimum is kept; it is never
     /// paid in validation or testing, and never to the Worker. 0: off.
     pub count_bonus: f32,
+    /// Env steps (summed over the environments) over which the count-based
+    /// bonus falls linearly from `β` to 0 (the paper uses none; count-based
+    /// bonuses are commonly annealed so the last stretch of training
+    /// optimises the task's reward alone). Past it the bonus is 0, so the
+    /// agent then learns from the task's reward only. 0: the bonus fades by
+    /// `1/√n` alone, never to 0.
+    pub count_bonus_fade: u64,
     /// How the Worker's (or the baseline's) and the Manager's updates get
     /// their gradients: `"rust-core"` (production, the default; not written
     /// to `config.toml`) or `"tch"` (the reference the tests hold it equal
@@ -344,6 +351,7 @@ impl Default for AgentConfig {
             door_key_actions: DoorKeyActions::default(),
             worker_task_share: 0.0,
             count_bonus: 0.0,
+            count_bonus_fade: 0,
             grad_path: GradPath::RustCore,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: ExitCandidate::default(),

@@ -40,7 +40,12 @@ pub(super) struct VisitCounts(Vec<Vec<u32>>);
 impl VisitCounts {
     /// Counts a training visit of `cell` (of a grid of `cells`) in
     /// environment `e` of `envs` and returns the bonus `beta / √n`, `n` the
-    /// visits so far, this one included.
+    /// visits so far, this one included. With `fade` > 0 the bonus is
+    /// scaled by `max(0, 1 − t / fade)`, `t` the env steps trained so far
+    /// over all `envs` environments (this environment's visits, all cells,
+    /// times `envs`: every environment steps once per batch step), so it
+    /// is gone after `fade` env steps
+    /// ([`super::config::AgentConfig::count_bonus_fade`]).
     pub(super) fn bonus(
         &mut self,
         e: usize,
@@ -48,13 +53,21 @@ impl VisitCounts {
         cell: u32,
         cells: usize,
         beta: f32,
+        fade: u64,
     ) -> f32 {
         if self.0.is_empty() {
             self.0 = vec![vec![0; cells]; envs];
         }
-        let n = &mut self.0[e][cell as usize];
-        *n += 1;
-        beta / (*n as f32).sqrt()
+        let row = &mut self.0[e];
+        row[cell as usize] += 1;
+        let n = row[cell as usize];
+        let scale = if fade == 0 {
+            1.0
+        } else {
+            let trained = row.iter().map(|&v| u64::from(v)).sum::<u64>() * envs as u64;
+            (1.0 - trained as f64 / fade as f64).max(0.0) as f32
+        };
+        scale * beta / (n as f32).sqrt()
     }
 
     /// No bonus has been paid yet.

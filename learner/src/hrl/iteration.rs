@@ -184,7 +184,14 @@ impl HrlAgent {
             // The count-based exploration bonus (training only).
             let bonus = if train && self.cfg.count_bonus > 0.0 {
                 let cells = obs.env_cells(e).len();
-                ctl.visits.bonus(e, n, cell, cells, self.cfg.count_bonus)
+                ctl.visits.bonus(
+                    e,
+                    n,
+                    cell,
+                    cells,
+                    self.cfg.count_bonus,
+                    self.cfg.count_bonus_fade,
+                )
             } else {
                 0.0
             };

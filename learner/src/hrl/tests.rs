@@ -348,6 +348,80 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
 }
 
 #[test]
+fn the_count_bonus_fades_linearly_to_nothing_over_its_fade_steps() {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 3;
+    let (beta, fade_batches) = (0.5, 6u64);
+    let cfg = AgentConfig {
+        count_bonus: beta,
+        count_bonus_fade: fade_batches * n as u64,
+        ..small(AgentKind::WideNarrow, Candidates::All, n)
+    };
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
+    let mut env = corridors(n, 100);
+    let mut ctl = agent.controller(n, 11);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
+    let mut counts = reports::StepCounts::default();
+    let mut visits = vec![std::collections::HashMap::<u32, u32>::new(); n];
+    let (mut expected, mut task_only) = (vec![0f32; n], vec![0f32; n]);
+    for step in 1..=12u64 {
+        agent
+            .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+            .expect("step");
+        let obs = env.observe();
+        // The share of the bonus left after `step` batch steps.
+        let left = (1.0 - step as f32 / fade_batches as f32).max(0.0);
+        for e in 0..n {
+            let v = visits[e].entry(obs.end_cell(e)).or_default();
+            *v += 1;
+            expected[e] += obs.meta[e].reward + left * beta / (*v as f32).sqrt();
+            task_only[e] += obs.meta[e].reward;
+        }
+    }
+    for e in 0..n {
+        let booked: f32 = ctl.queues[e]
+            .decisions
+            .iter()
+            .flat_map(|d| d.rewards.iter())
+            .sum();
+        assert!(
+            (booked - expected[e]).abs() < 1e-4,
+            "env {e}: the Manager booked {booked}, the task and the fading bonus {}",
+            expected[e]
+        );
+        assert!(
+            booked > task_only[e] + 0.1,
+            "env {e}: a bonus was paid before the fade ended"
+        );
+    }
+    // Past the fade, a step pays the task's reward alone.
+    let before: Vec<f32> = (0..n)
+        .map(|e| {
+            ctl.queues[e]
+                .decisions
+                .iter()
+                .flat_map(|d| d.rewards.iter())
+                .sum()
+        })
+        .collect();
+    agent
+        .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+        .expect("step");
+    let obs = env.observe();
+    for e in 0..n {
+        let after: f32 = ctl.queues[e]
+            .decisions
+            .iter()
+            .flat_map(|d| d.rewards.iter())
+            .sum();
+        assert!(
+            (after - before[e] - obs.meta[e].reward).abs() < 1e-5,
+            "env {e}: a bonus was paid after the fade"
+        );
+    }
+}
+
+#[test]
 fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpoint() {
     let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
     let n = 3;
