@@ -197,12 +197,17 @@ impl A2cAgent {
         stats: &mut StepCounts,
     ) -> Result<(), LearnerError> {
         let n = env.num_envs();
-        let (choices, state) = {
+        let (choices, state, balls_before) = {
             let obs = env.observe();
+            let before: Vec<u8> = obs
+                .meta
+                .iter()
+                .map(super::controller::balls_before)
+                .collect();
             let out = self.learner.act(&obs, None, &carry.state, train);
             let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
             let choices = crate::seeding::sample_categorical(&mut carry.rng, &probs, false);
-            (choices, out.state)
+            (choices, out.state, before)
         };
         let actions: Vec<u8> = choices.iter().map(|&i| self.actions[i as usize]).collect();
         let t = std::time::Instant::now();
@@ -227,6 +232,14 @@ impl A2cAgent {
                     cells,
                     self.cfg.count_bonus,
                     self.cfg.count_bonus_fade,
+                );
+            }
+            if train && self.cfg.ball_shaping > 0.0 {
+                rewards[e] += super::controller::ball_shaping(
+                    self.cfg.ball_shaping,
+                    self.cfg.worker.gamma,
+                    balls_before[e],
+                    m,
                 );
             }
             if m.truncated() {

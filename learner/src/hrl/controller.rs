@@ -81,6 +81,33 @@ impl VisitCounts {
     }
 }
 
+/// The potential `Φ` of the state an observation's record leads from: the
+/// balls collected so far in its episode, 0 at the start of one (a record
+/// that ended an episode is followed by the next one's start)
+/// ([`super::config::AgentConfig::ball_shaping`]).
+pub(super) fn balls_before(meta: &shm_schemas::EnvMeta) -> u8 {
+    if meta.done() { 0 } else { meta.balls }
+}
+
+/// The shaping term `γ Φ(s') − Φ(s)` of one step with `Φ = weight × balls`
+/// (Ng, Harada & Russell 1999; [`super::config::AgentConfig::ball_shaping`]):
+/// `before` the balls before the step ([`balls_before`]), `meta` the step's
+/// record. A step the task ended leads to no state (`Φ(s') = 0`); a cut one
+/// keeps its balls, as its value is bootstrapped.
+pub(super) fn ball_shaping(
+    weight: f32,
+    gamma: f64,
+    before: u8,
+    meta: &shm_schemas::EnvMeta,
+) -> f32 {
+    let after = if meta.terminated() {
+        0.0
+    } else {
+        f32::from(meta.balls)
+    };
+    weight * (gamma as f32 * after - f32::from(before))
+}
+
 /// One environment's hierarchical state.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub(super) struct EnvCtl {

@@ -149,9 +149,17 @@ impl HrlAgent {
         stats: &mut StepCounts,
     ) -> Result<(), LearnerError> {
         let n = env.num_envs();
-        let acted = {
+        let (acted, balls_before) = {
             let obs = env.observe();
-            self.act(ctl, &obs, train, trace.as_deref_mut(), stats)?
+            let before: Vec<u8> = obs
+                .meta
+                .iter()
+                .map(super::controller::balls_before)
+                .collect();
+            (
+                self.act(ctl, &obs, train, trace.as_deref_mut(), stats)?,
+                before,
+            )
         };
         let traversing: Vec<bool> = ctl.envs.iter().map(|c| c.traversal.is_some()).collect();
         // The steered legs before the step (for π_g's fine-tuning).
@@ -195,9 +203,19 @@ impl HrlAgent {
             } else {
                 0.0
             };
+            let shaping = if train && self.cfg.ball_shaping > 0.0 {
+                super::controller::ball_shaping(
+                    self.cfg.ball_shaping,
+                    self.cfg.manager.gamma,
+                    balls_before[e],
+                    m,
+                )
+            } else {
+                0.0
+            };
             let mut interval_over = ended;
             if train {
-                ctl.book_manager_reward(e, m.reward + bonus);
+                ctl.book_manager_reward(e, m.reward + bonus + shaping);
             }
             if traversing[e] {
                 stats.traversal_steps += 1;

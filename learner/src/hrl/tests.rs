@@ -474,3 +474,85 @@ fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpo
     .expect("restore");
     assert_eq!(back.visits, ctl.visits, "the counts resume with the run");
 }
+
+/// A corridor with two balls on the way to the exit.
+const BALL_CORRIDOR: &str = "#########\n#>.B.B.E#\n#########\n";
+
+/// The shaping terms of the records of one scripted episode that walks the
+/// ball corridor east (MultiGoal-Sparse), cut after `max_steps` steps.
+fn shaping_of_walk(weight: f32, gamma: f64, max_steps: u32) -> Vec<(EnvMeta, f32)> {
+    let layout = Layout::parse("balls", BALL_CORRIDOR).expect("layout");
+    let env_cfg = EnvConfig {
+        task: Task::MultiGoalSparse,
+        max_steps,
+        balls: BallSpawn::Layout,
+        auto_reset: AutoReset::SameStep,
+    };
+    let mut env = InProcess::new(layout, env_cfg, 1, 3, 1).expect("env");
+    let mut out = Vec::new();
+    loop {
+        let before = controller::balls_before(&env.observe().meta[0]);
+        env.step(&[sim::action::FORWARD]).expect("step");
+        let m = env.observe().meta[0];
+        out.push((m, controller::ball_shaping(weight, gamma, before, &m)));
+        if m.done() {
+            return out;
+        }
+    }
+}
+
+#[test]
+fn ball_shaping_pays_each_ball_when_collected_and_keeps_the_optimum() {
+    let (weight, gamma) = (0.2, 0.99);
+    // Six steps east: two balls, then the exit ends the episode.
+    let walk = shaping_of_walk(weight, gamma, 100);
+    assert_eq!(walk.len(), 6);
+    let last = walk.last().expect("steps").0;
+    assert!(
+        last.terminated() && last.balls == 2,
+        "exited with both balls"
+    );
+    let sparse: f32 = walk.iter().map(|(m, _)| m.reward).sum();
+    assert!(
+        sparse > 0.3,
+        "Sparse pays the two balls at the exit: {sparse}"
+    );
+    // Each ball pays about its weight on the step that collects it.
+    let mut held = 0;
+    for (m, f) in &walk[..5] {
+        if m.balls > held {
+            assert!(*f > 0.9 * weight, "a ball collected pays {f}");
+        } else {
+            assert!(f.abs() < 0.01, "a step without a ball pays {f}");
+        }
+        held = m.balls;
+    }
+    assert!(
+        walk[5].1 < -1.9 * weight,
+        "the exit takes the balls' payment back: {}",
+        walk[5].1
+    );
+    // Potential-based: the discounted shaping of an episode the task ended
+    // telescopes to Φ(s_0) = 0, so no policy gains or loses by it.
+    let discounted: f64 = walk
+        .iter()
+        .enumerate()
+        .map(|(t, (_, f))| gamma.powi(t as i32) * f64::from(*f))
+        .sum();
+    assert!(discounted.abs() < 1e-5, "discounted shaping {discounted}");
+    // An episode the step limit cuts keeps its potential: its value is
+    // bootstrapped, so the sum telescopes to γ^T Φ(s_T).
+    let cut = shaping_of_walk(weight, gamma, 4);
+    let end = cut.last().expect("steps").0;
+    assert!(end.truncated() && end.balls == 2);
+    let discounted: f64 = cut
+        .iter()
+        .enumerate()
+        .map(|(t, (_, f))| gamma.powi(t as i32) * f64::from(*f))
+        .sum();
+    let expected = gamma.powi(cut.len() as i32) * f64::from(weight) * 2.0;
+    assert!(
+        (discounted - expected).abs() < 1e-5,
+        "{discounted} against {expected}"
+    );
+}
