@@ -199,11 +199,10 @@ impl A2cAgent {
         let n = env.num_envs();
         let (choices, state, balls_before) = {
             let obs = env.observe();
-            let before: Vec<u8> = obs
-                .meta
-                .iter()
-                .map(super::controller::balls_before)
-                .collect();
+            let before = super::controller::balls_before_batch(
+                obs.meta,
+                train && self.cfg.ball_shaping > 0.0,
+            );
             let out = self.learner.act(&obs, None, &carry.state, train);
             let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
             let choices = crate::seeding::sample_categorical(&mut carry.rng, &probs, false);

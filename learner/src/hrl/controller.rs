@@ -89,6 +89,16 @@ pub(super) fn balls_before(meta: &shm_schemas::EnvMeta) -> u8 {
     if meta.done() { 0 } else { meta.balls }
 }
 
+/// [`balls_before`] of every environment of a batch's records, or nothing
+/// when `shaping` is off (no allocation on the steps that need none).
+pub(super) fn balls_before_batch(meta: &[shm_schemas::EnvMeta], shaping: bool) -> Vec<u8> {
+    if shaping {
+        meta.iter().map(balls_before).collect()
+    } else {
+        Vec::new()
+    }
+}
+
 /// The shaping term `γ Φ(s') − Φ(s)` of one step with `Φ = weight × balls`
 /// (Ng, Harada & Russell 1999; [`super::config::AgentConfig::ball_shaping`]):
 /// `before` the balls before the step ([`balls_before`]), `meta` the step's

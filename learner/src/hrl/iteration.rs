@@ -151,11 +151,10 @@ impl HrlAgent {
         let n = env.num_envs();
         let (acted, balls_before) = {
             let obs = env.observe();
-            let before: Vec<u8> = obs
-                .meta
-                .iter()
-                .map(super::controller::balls_before)
-                .collect();
+            let before = super::controller::balls_before_batch(
+                obs.meta,
+                train && self.cfg.ball_shaping > 0.0,
+            );
             (
                 self.act(ctl, &obs, train, trace.as_deref_mut(), stats)?,
                 before,

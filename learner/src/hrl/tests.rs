@@ -347,9 +347,27 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
     assert_eq!(counts.intervals, 0);
 }
 
+/// An agent of `cfg` on `n` corridors (episodes of at most 100 steps), its
+/// controller and its Worker's rollout started, ready to train.
+fn corridor_training(cfg: &AgentConfig, n: usize) -> (HrlAgent, InProcess, controller::Controller) {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let mut agent = HrlAgent::new(cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
+    let ctl = agent.controller(n, 11);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
+    (agent, corridors(n, 100), ctl)
+}
+
+/// The rewards environment `e`'s Manager has booked in this rollout.
+fn booked_manager_reward(ctl: &controller::Controller, e: usize) -> f32 {
+    ctl.queues[e]
+        .decisions
+        .iter()
+        .flat_map(|d| d.rewards.iter())
+        .sum()
+}
+
 #[test]
 fn the_count_bonus_fades_linearly_to_nothing_over_its_fade_steps() {
-    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
     let n = 3;
     let (beta, fade_batches) = (0.5, 6u64);
     let cfg = AgentConfig {
@@ -357,10 +375,7 @@ fn the_count_bonus_fades_linearly_to_nothing_over_its_fade_steps() {
         count_bonus_fade: fade_batches * n as u64,
         ..small(AgentKind::WideNarrow, Candidates::All, n)
     };
-    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
-    let mut env = corridors(n, 100);
-    let mut ctl = agent.controller(n, 11);
-    agent.worker.learner.rollout.start(&ctl.worker_state);
+    let (mut agent, mut env, mut ctl) = corridor_training(&cfg, n);
     let mut counts = reports::StepCounts::default();
     let mut visits = vec![std::collections::HashMap::<u32, u32>::new(); n];
     let (mut expected, mut task_only) = (vec![0f32; n], vec![0f32; n]);
@@ -379,11 +394,7 @@ fn the_count_bonus_fades_linearly_to_nothing_over_its_fade_steps() {
         }
     }
     for e in 0..n {
-        let booked: f32 = ctl.queues[e]
-            .decisions
-            .iter()
-            .flat_map(|d| d.rewards.iter())
-            .sum();
+        let booked = booked_manager_reward(&ctl, e);
         assert!(
             (booked - expected[e]).abs() < 1e-4,
             "env {e}: the Manager booked {booked}, the task and the fading bonus {}",
@@ -395,27 +406,15 @@ fn the_count_bonus_fades_linearly_to_nothing_over_its_fade_steps() {
         );
     }
     // Past the fade, a step pays the task's reward alone.
-    let before: Vec<f32> = (0..n)
-        .map(|e| {
-            ctl.queues[e]
-                .decisions
-                .iter()
-                .flat_map(|d| d.rewards.iter())
-                .sum()
-        })
-        .collect();
+    let before: Vec<f32> = (0..n).map(|e| booked_manager_reward(&ctl, e)).collect();
     agent
         .step_batch(&mut ctl, &mut env, true, None, &mut counts)
         .expect("step");
     let obs = env.observe();
-    for e in 0..n {
-        let after: f32 = ctl.queues[e]
-            .decisions
-            .iter()
-            .flat_map(|d| d.rewards.iter())
-            .sum();
+    for (e, before) in before.iter().enumerate() {
+        let after = booked_manager_reward(&ctl, e);
         assert!(
-            (after - before[e] - obs.meta[e].reward).abs() < 1e-5,
+            (after - before - obs.meta[e].reward).abs() < 1e-5,
             "env {e}: a bonus was paid after the fade"
         );
     }
@@ -423,17 +422,13 @@ fn the_count_bonus_fades_linearly_to_nothing_over_its_fade_steps() {
 
 #[test]
 fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpoint() {
-    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
     let n = 3;
     let beta = 0.5;
     let cfg = AgentConfig {
         count_bonus: beta,
         ..small(AgentKind::WideNarrow, Candidates::All, n)
     };
-    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, None, 5).expect("agent");
-    let mut env = corridors(n, 100);
-    let mut ctl = agent.controller(n, 11);
-    agent.worker.learner.rollout.start(&ctl.worker_state);
+    let (mut agent, mut env, mut ctl) = corridor_training(&cfg, n);
     let mut counts = reports::StepCounts::default();
     let mut visits = vec![std::collections::HashMap::<u32, u32>::new(); n];
     let mut expected = vec![0f32; n];
@@ -449,11 +444,7 @@ fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpo
         }
     }
     for (e, sum) in expected.iter().enumerate() {
-        let booked: f32 = ctl.queues[e]
-            .decisions
-            .iter()
-            .flat_map(|d| d.rewards.iter())
-            .sum();
+        let booked = booked_manager_reward(&ctl, e);
         assert!(
             (booked - sum).abs() < 1e-4,
             "env {e}: the Manager booked {booked}, the task and the bonus {sum}"
