@@ -21,7 +21,7 @@ use super::config::{AgentConfig, AgentKind, WorldGraphInputs};
 use super::controller::{Controller, SavedController};
 use super::init;
 use super::manager::ManagerSide;
-use super::traversal::Traverser;
+use super::traversal::{NearWindow, Traverser};
 use super::wide_narrow;
 use super::worker::WorkerSide;
 use crate::a2c::PhaseTimes;
@@ -114,7 +114,15 @@ impl HrlAgent {
             )?),
             _ => None,
         };
-        let traverser = Traverser::new(cfg, task, inputs.graph, inputs.gcp)?;
+        let mut traverser = Traverser::new(cfg, task, inputs.graph, inputs.gcp)?;
+        if cfg.traverse_outside_window
+            && let Some(window) = &manager.window
+        {
+            traverser.start_outside(NearWindow {
+                half: window.side / 2,
+                width,
+            });
+        }
         let ctl = Controller::new(
             cfg.envs,
             seed,

@@ -199,6 +199,16 @@ pub struct AgentConfig {
     /// payment back at the exit. Never paid in validation or testing, never
     /// to the Worker. 0: off.
     pub ball_shaping: f32,
+    /// WN with traversal: a traversal starts only while the agent stands
+    /// outside the narrow window around `g_w` (section 4.3 says the Worker
+    /// *can* traverse when it meets a pivotal state with a route to `g_w`;
+    /// it is silent on when it should not). Inside the window `g_n` is at
+    /// most half the window's side away on each axis, and a route to `g_w`
+    /// first can lead away from it and back: the Worker walks to `g_n`
+    /// itself. Off: a traversal starts from any such pivotal state until
+    /// `g_w` is reached (the paper's wording taken literally). Changes
+    /// nothing without traversal.
+    pub traverse_outside_window: bool,
     /// How the Worker's (or the baseline's) and the Manager's updates get
     /// their gradients: `"rust-core"` (production, the default; not written
     /// to `config.toml`) or `"tch"` (the reference the tests hold it equal
@@ -365,6 +375,7 @@ impl Default for AgentConfig {
             count_bonus: 0.0,
             count_bonus_fade: 0,
             ball_shaping: 0.0,
+            traverse_outside_window: false,
             grad_path: GradPath::RustCore,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: ExitCandidate::default(),

@@ -347,6 +347,62 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
     assert_eq!(counts.intervals, 0);
 }
 
+/// Traversal steps of the first batch step of an agent on the corridor
+/// whose world graph has nodes on `(1, 1)` (the start), `(3, 1)` and
+/// `(6, 1)`, given `(g_w, g_n)` = (`wide`, the exit) with
+/// `traverse_outside_window` set to `outside` (window side 5).
+fn first_step_traversal(wide: u32, outside: bool) -> u64 {
+    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
+    let n = 2;
+    let planner_cfg = planner::PlannerConfig {
+        candidates: planner::CandidateSet::Given,
+        edge_search: planner::EdgeSearch::Exhaustive,
+        task: Task::MultiGoal,
+        ..planner::PlannerConfig::default()
+    };
+    let nodes = [at(1, 1), at(3, 1), at(6, 1)].map(planner::CellIdx);
+    let graph = planner::WorldGraph::build(&layout, &planner_cfg, &nodes).expect("graph");
+    let cfg = AgentConfig {
+        traversal: true,
+        window: 5,
+        traverse_outside_window: outside,
+        ..small(AgentKind::WideNarrow, Candidates::Pivotal, n)
+    };
+    let inputs = WorldGraphInputs {
+        graph: Some(graph),
+        gcp: None,
+    };
+    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 5).expect("agent");
+    let mut env = corridors(n, 100);
+    let mut ctl = agent.controller(n, 11);
+    agent.worker.learner.rollout.start(&ctl.worker_state);
+    hand_goals(&mut ctl, wide, at(7, 1), at(1, 1));
+    let mut counts = reports::StepCounts::default();
+    agent
+        .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+        .expect("step");
+    counts.traversal_steps
+}
+
+#[test]
+fn traversal_outside_the_window_leaves_a_near_wide_goal_to_the_worker() {
+    let n = 2;
+    // g_w two cells away, inside the 5×5 window around it.
+    assert_eq!(
+        first_step_traversal(at(3, 1), false),
+        n,
+        "the paper's rule traverses"
+    );
+    assert_eq!(
+        first_step_traversal(at(3, 1), true),
+        0,
+        "inside g_w's window the Worker walks"
+    );
+    // g_w five cells away, outside its window: both traverse.
+    assert_eq!(first_step_traversal(at(6, 1), true), n);
+    assert_eq!(first_step_traversal(at(6, 1), false), n);
+}
+
 /// An agent of `cfg` on `n` corridors (episodes of at most 100 steps), its
 /// controller and its Worker's rollout started, ready to train.
 fn corridor_training(cfg: &AgentConfig, n: usize) -> (HrlAgent, InProcess, controller::Controller) {

@@ -381,6 +381,30 @@ pub(super) struct Traverser {
     steering: Option<Steering>,
     /// Scratch buffer of the planner.
     route: Route,
+    /// No traversal starts while the agent stands in the narrow window
+    /// around `g_w` ([`AgentConfig::traverse_outside_window`]).
+    window: Option<NearWindow>,
+}
+
+/// The narrow window around `g_w`, as the traversal's start condition sees
+/// it: half its side, and the width of the grid its cells index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct NearWindow {
+    /// Half the window's side (its cells lie this far from `g_w` on each
+    /// axis at most).
+    pub(super) half: usize,
+    /// Width of the grid.
+    pub(super) width: usize,
+}
+
+impl NearWindow {
+    /// True when `cell` lies in the window around `centre`.
+    pub(super) fn contains(self, centre: u32, cell: u32) -> bool {
+        let (w, c) = (self.width, self.half);
+        let (cx, cy) = (centre as usize % w, centre as usize / w);
+        let (x, y) = (cell as usize % w, cell as usize / w);
+        cx.abs_diff(x) <= c && cy.abs_diff(y) <= c
+    }
 }
 
 impl Traverser {
@@ -423,7 +447,14 @@ impl Traverser {
             execution,
             steering,
             route: Route::with_capacity(1024, 64),
+            window: None,
         })
+    }
+
+    /// Starts no traversal while the agent stands in `window` around `g_w`
+    /// ([`AgentConfig::traverse_outside_window`]).
+    pub(super) fn start_outside(&mut self, window: NearWindow) {
+        self.window = Some(window);
     }
 
     /// The world graph traversal follows (`None`: no traversal).
@@ -456,7 +487,9 @@ impl Traverser {
 
     /// Starts a traversal for environment `e` of `obs` into `slot` if the
     /// agent stands on a node with a route to its wide goal (of `goal`),
-    /// no traversal is under way and `g_w` is not paid for yet.
+    /// no traversal is under way and `g_w` is not paid for yet (and, with
+    /// [`Traverser::start_outside`], the agent stands outside the window
+    /// around `g_w`).
     pub(super) fn try_start(
         &mut self,
         goal: &WorkerGoal,
@@ -469,6 +502,13 @@ impl Traverser {
         };
         if slot.is_some() || goal.wide_paid || goal.wide == NO_GOAL {
             return false;
+        }
+        if let Some(window) = self.window {
+            let m = &obs.meta[e];
+            let here = CellIdx::from_xy(m.x as usize, m.y as usize, obs.width).0;
+            if window.contains(goal.wide, here) {
+                return false;
+            }
         }
         match Traversal::plan(graph, obs, e, goal.wide, self.execution, &mut self.route) {
             Some(t) => {
