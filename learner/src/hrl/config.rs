@@ -209,6 +209,16 @@ pub struct AgentConfig {
     /// `g_w` is reached (the paper's wording taken literally). Changes
     /// nothing without traversal.
     pub traverse_outside_window: bool,
+    /// WN: reaching `g_n` pays `g_w` as well when `g_w` was not reached
+    /// in the interval. Section 4.2 rewards the Worker "if reaching `g_w`
+    /// or `g_n` within the horizon `c`"; read as one reward for each goal
+    /// on arrival (off, the default), the Worker earns twice by walking
+    /// through `g_w` on its way to `g_n` and learns that detour even where
+    /// `g_n` is nearer. On, every interval that reaches `g_n` pays both
+    /// goals, whichever way, so the shortest way to `g_n` is the Worker's
+    /// best (`g_w` still pays on arrival, and a traversal's hand-over as
+    /// [`HandOver`] says).
+    pub narrow_pays_wide: bool,
     /// How the Worker's (or the baseline's) and the Manager's updates get
     /// their gradients: `"rust-core"` (production, the default; not written
     /// to `config.toml`) or `"tch"` (the reference the tests hold it equal
@@ -376,6 +386,7 @@ impl Default for AgentConfig {
             count_bonus_fade: 0,
             ball_shaping: 0.0,
             traverse_outside_window: false,
+            narrow_pays_wide: false,
             grad_path: GradPath::RustCore,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: ExitCandidate::default(),

@@ -329,6 +329,7 @@ impl HrlAgent {
         end: EpisodeEnd,
     ) -> WorkerStep {
         let c = &mut ctl.envs[e];
+        let was_paid = c.goal.wide_paid;
         let mut s = c.goal.book_arrival(
             arrival,
             end,
@@ -337,6 +338,10 @@ impl HrlAgent {
             self.cfg.step_penalty,
             self.cfg.worker_task_end,
         );
+        if self.cfg.narrow_pays_wide {
+            c.goal
+                .narrow_pays_wide(&mut s, was_paid, self.cfg.goal_reward);
+        }
         if !s.interval_over && self.traverser.try_start(&c.goal, &mut c.traversal, obs, e) {
             let pay = match self.cfg.hand_over {
                 HandOver::PaysWideGoal => self.cfg.goal_reward,

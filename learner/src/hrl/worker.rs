@@ -204,6 +204,18 @@ impl WorkerGoal {
         }
     }
 
+    /// Books `g_n` reached on `step` as `g_w` reached too: pays `pay` if
+    /// `g_w` is another cell and was not paid before the step (`was_paid`)
+    /// ([`super::config::AgentConfig::narrow_pays_wide`]). Every interval
+    /// that reaches `g_n` then pays both goals, whichever way the Worker
+    /// went, so a walk through `g_w` earns nothing over the shortest way.
+    pub fn narrow_pays_wide(&mut self, step: &mut WorkerStep, was_paid: bool, pay: f32) {
+        if step.reached && !was_paid && self.wide != self.narrow {
+            step.reward += pay;
+            self.wide_paid = true;
+        }
+    }
+
     /// Books a step the Worker did not take (a traversal's) that left the
     /// agent on `cell`.
     pub fn moved_to(&mut self, cell: u32) {
@@ -362,6 +374,41 @@ mod tests {
             Arrival::of_step(beside, floor, [Key as u8, Floor as u8]),
             Arrival::walked(beside)
         );
+    }
+
+    /// With `narrow_pays_wide`, an interval pays `g_w` and `g_n` whether
+    /// the Worker walks through `g_w` or straight to `g_n`; off, only the
+    /// walk through `g_w` earns both.
+    #[test]
+    fn reaching_g_n_pays_g_w_too_so_the_detour_through_g_w_earns_nothing() {
+        let (goal, penalty, c, end) = (1.0, -0.01, 20, WorkerTaskEnd::Terminal);
+        // g_w = 10, g_n = 12, set on cell 2; walks of (cells) under the
+        // rule on or off: the interval's reward.
+        let walk = |cells: &[u32], on: bool| -> f32 {
+            let mut g = WorkerGoal::new(10, 12, 2);
+            let mut total = 0.0;
+            for &cell in cells {
+                let was_paid = g.wide_paid;
+                let mut s = g.book(cell, Running, c, goal, penalty, end);
+                if on {
+                    g.narrow_pays_wide(&mut s, was_paid, goal);
+                }
+                total += s.reward;
+            }
+            total
+        };
+        let (straight, through) = ([11, 12], [10, 11, 12]);
+        assert_eq!(walk(&straight, false), 2.0 * penalty + goal);
+        assert_eq!(walk(&through, false), 3.0 * penalty + 2.0 * goal);
+        assert_eq!(walk(&straight, true), 2.0 * penalty + 2.0 * goal);
+        assert_eq!(walk(&through, true), 3.0 * penalty + 2.0 * goal);
+        assert!(walk(&straight, true) > walk(&through, true));
+        // One goal (Feudal, or an object that is its own narrow goal) is
+        // paid once.
+        let mut g = WorkerGoal::new(7, 7, 2);
+        let mut s = g.book(7, Running, c, goal, penalty, end);
+        g.narrow_pays_wide(&mut s, false, goal);
+        assert_eq!(s.reward, penalty + goal);
     }
 
     #[test]
