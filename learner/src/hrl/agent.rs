@@ -21,7 +21,7 @@ use super::config::{AgentConfig, AgentKind, WorldGraphInputs};
 use super::controller::{Controller, SavedController};
 use super::init;
 use super::manager::ManagerSide;
-use super::traversal::{NearWindow, Traverser};
+use super::traversal::Traverser;
 use super::wide_narrow;
 use super::worker::WorkerSide;
 use crate::a2c::PhaseTimes;
@@ -118,10 +118,7 @@ impl HrlAgent {
         if cfg.traverse_outside_window
             && let Some(window) = &manager.window
         {
-            traverser.start_outside(NearWindow {
-                half: window.side / 2,
-                width,
-            });
+            traverser.start_outside(window.clone());
         }
         let ctl = Controller::new(
             cfg.envs,

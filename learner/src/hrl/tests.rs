@@ -293,30 +293,42 @@ fn an_environment_whose_episode_ends_gets_a_fresh_decision_next_step() {
     }
 }
 
-#[test]
-fn a_traversal_replays_its_route_and_its_steps_are_counted() {
+/// A WN agent of `cfg` with traversal over the corridor's world graph with
+/// `nodes` (cells), on `cfg.envs` corridors (episodes of at most 100
+/// steps), its controller and its Worker's rollout started.
+fn traversing_agent(
+    cfg: &AgentConfig,
+    nodes: &[u32],
+) -> (HrlAgent, InProcess, controller::Controller) {
     let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
-    let n = 2;
     let planner_cfg = planner::PlannerConfig {
         candidates: planner::CandidateSet::Given,
         edge_search: planner::EdgeSearch::Exhaustive,
         task: Task::MultiGoal,
         ..planner::PlannerConfig::default()
     };
-    let nodes = [planner::CellIdx(at(1, 1)), planner::CellIdx(at(4, 1))];
+    let nodes: Vec<planner::CellIdx> = nodes.iter().copied().map(planner::CellIdx).collect();
     let graph = planner::WorldGraph::build(&layout, &planner_cfg, &nodes).expect("graph");
     let cfg = AgentConfig {
         traversal: true,
-        ..small(AgentKind::WideNarrow, Candidates::Pivotal, n)
+        ..cfg.clone()
     };
     let inputs = WorldGraphInputs {
         graph: Some(graph),
         gcp: None,
     };
     let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 5).expect("agent");
-    let mut env = corridors(n, 100);
-    let mut ctl = agent.controller(n, 11);
+    let env = corridors(cfg.envs, 100);
+    let ctl = agent.controller(cfg.envs, 11);
     agent.worker.learner.rollout.start(&ctl.worker_state);
+    (agent, env, ctl)
+}
+
+#[test]
+fn a_traversal_replays_its_route_and_its_steps_are_counted() {
+    let n = 2;
+    let cfg = small(AgentKind::WideNarrow, Candidates::Pivotal, n);
+    let (mut agent, mut env, mut ctl) = traversing_agent(&cfg, &[at(1, 1), at(4, 1)]);
     // The agent stands on a node with a route to g_w: it traverses.
     hand_goals(&mut ctl, at(4, 1), at(5, 1), at(1, 1));
     let mut counts = reports::StepCounts::default();
@@ -352,30 +364,12 @@ fn a_traversal_replays_its_route_and_its_steps_are_counted() {
 /// `(6, 1)`, given `(g_w, g_n)` = (`wide`, the exit) with
 /// `traverse_outside_window` set to `outside` (window side 5).
 fn first_step_traversal(wide: u32, outside: bool) -> u64 {
-    let layout = Layout::parse("corridor", CORRIDOR).expect("layout");
-    let n = 2;
-    let planner_cfg = planner::PlannerConfig {
-        candidates: planner::CandidateSet::Given,
-        edge_search: planner::EdgeSearch::Exhaustive,
-        task: Task::MultiGoal,
-        ..planner::PlannerConfig::default()
-    };
-    let nodes = [at(1, 1), at(3, 1), at(6, 1)].map(planner::CellIdx);
-    let graph = planner::WorldGraph::build(&layout, &planner_cfg, &nodes).expect("graph");
     let cfg = AgentConfig {
-        traversal: true,
         window: 5,
         traverse_outside_window: outside,
-        ..small(AgentKind::WideNarrow, Candidates::Pivotal, n)
+        ..small(AgentKind::WideNarrow, Candidates::Pivotal, 2)
     };
-    let inputs = WorldGraphInputs {
-        graph: Some(graph),
-        gcp: None,
-    };
-    let mut agent = HrlAgent::new(&cfg, &layout, Task::MultiGoal, Some(inputs), 5).expect("agent");
-    let mut env = corridors(n, 100);
-    let mut ctl = agent.controller(n, 11);
-    agent.worker.learner.rollout.start(&ctl.worker_state);
+    let (mut agent, mut env, mut ctl) = traversing_agent(&cfg, &[at(1, 1), at(3, 1), at(6, 1)]);
     hand_goals(&mut ctl, wide, at(7, 1), at(1, 1));
     let mut counts = reports::StepCounts::default();
     agent

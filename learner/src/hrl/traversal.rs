@@ -31,6 +31,7 @@ use tch::nn;
 
 use super::config::AgentConfig;
 use super::steering::{Leg, Steering};
+use super::wide_narrow::Window;
 use super::worker::WorkerGoal;
 use crate::a2c::input::{NO_GOAL, mask};
 use crate::a2c::net::LstmState;
@@ -383,28 +384,7 @@ pub(super) struct Traverser {
     route: Route,
     /// No traversal starts while the agent stands in the narrow window
     /// around `g_w` ([`AgentConfig::traverse_outside_window`]).
-    window: Option<NearWindow>,
-}
-
-/// The narrow window around `g_w`, as the traversal's start condition sees
-/// it: half its side, and the width of the grid its cells index.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) struct NearWindow {
-    /// Half the window's side (its cells lie this far from `g_w` on each
-    /// axis at most).
-    pub(super) half: usize,
-    /// Width of the grid.
-    pub(super) width: usize,
-}
-
-impl NearWindow {
-    /// True when `cell` lies in the window around `centre`.
-    pub(super) fn contains(self, centre: u32, cell: u32) -> bool {
-        let (w, c) = (self.width, self.half);
-        let (cx, cy) = (centre as usize % w, centre as usize / w);
-        let (x, y) = (cell as usize % w, cell as usize / w);
-        cx.abs_diff(x) <= c && cy.abs_diff(y) <= c
-    }
+    window: Option<Window>,
 }
 
 impl Traverser {
@@ -453,7 +433,7 @@ impl Traverser {
 
     /// Starts no traversal while the agent stands in `window` around `g_w`
     /// ([`AgentConfig::traverse_outside_window`]).
-    pub(super) fn start_outside(&mut self, window: NearWindow) {
+    pub(super) fn start_outside(&mut self, window: Window) {
         self.window = Some(window);
     }
 
@@ -503,10 +483,10 @@ impl Traverser {
         if slot.is_some() || goal.wide_paid || goal.wide == NO_GOAL {
             return false;
         }
-        if let Some(window) = self.window {
+        if let Some(window) = &self.window {
             let m = &obs.meta[e];
             let here = CellIdx::from_xy(m.x as usize, m.y as usize, obs.width).0;
-            if window.contains(goal.wide, here) {
+            if window.slot_of(goal.wide, here).is_some() {
                 return false;
             }
         }
