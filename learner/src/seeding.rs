@@ -56,9 +56,7 @@ pub fn sample_categorical(rng: &mut impl Rng, probs: &Tensor, greedy: bool) -> V
     flat.chunks_exact(num_actions)
         .map(|p| {
             let chosen = if greedy {
-                p.iter()
-                    .enumerate()
-                    .fold(0, |best, (a, &q)| if q > p[best] { a } else { best })
+                most_likely(p)
             } else {
                 let u: f32 = rng.random();
                 let mut cumulative = 0.0;
@@ -87,6 +85,17 @@ pub fn sample_index(rng: &mut impl Rng, probs: &Tensor) -> Vec<usize> {
 /// [`sample_index`] of probabilities as floats: one draw per `width`-wide
 /// row of `flat`.
 pub fn sample_rows(rng: &mut impl Rng, flat: &[f32], width: usize) -> Vec<usize> {
+    choose_rows(rng, flat, width, false)
+}
+
+/// [`sample_rows`], or each row's most likely choice when `greedy` (the
+/// first of equals; masked choices have probability 0 and are never the
+/// most likely unless the whole row is masked). Greedy takes nothing from
+/// `rng`.
+pub fn choose_rows(rng: &mut impl Rng, flat: &[f32], width: usize, greedy: bool) -> Vec<usize> {
+    if greedy {
+        return flat.chunks_exact(width).map(most_likely).collect();
+    }
     flat.chunks_exact(width)
         .map(|p| {
             let u: f32 = rng.random();
@@ -104,12 +113,41 @@ pub fn sample_rows(rng: &mut impl Rng, flat: &[f32], width: usize) -> Vec<usize>
         .collect()
 }
 
+/// The index of a row's largest probability (the first of equals).
+fn most_likely(p: &[f32]) -> usize {
+    p.iter()
+        .enumerate()
+        .fold(0, |best, (a, &q)| if q > p[best] { a } else { best })
+}
+
 #[cfg(test)]
 mod tests {
     use rand::SeedableRng;
     use rand::rngs::SmallRng;
 
     use super::*;
+
+    #[test]
+    fn greedy_rows_take_each_rows_most_likely_choice_and_no_draw() {
+        // Rows of 4; a masked choice has probability 0.
+        let flat = [0.1, 0.6, 0.3, 0.0, 0.0, 0.2, 0.2, 0.6, 0.5, 0.0, 0.5, 0.0];
+        let mut rng = SmallRng::seed_from_u64(5);
+        let before = rng.clone().random::<u64>();
+        assert_eq!(choose_rows(&mut rng, &flat, 4, true), vec![1, 3, 0]);
+        assert_eq!(rng.random::<u64>(), before, "greedy drew from the RNG");
+        let sampled: Vec<Vec<usize>> = (0..200)
+            .map(|_| choose_rows(&mut rng, &flat, 4, false))
+            .collect();
+        assert!(
+            sampled
+                .iter()
+                .all(|r| r[0] != 3 && r[1] != 0 && r[2] % 2 == 0)
+        );
+        assert!(
+            sampled.iter().any(|r| r[0] != 1),
+            "sampling took the mode alone"
+        );
+    }
 
     #[test]
     fn initialisation_is_repeatable_under_concurrent_draws() {

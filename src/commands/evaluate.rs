@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
+use learner::hrl::config::EvalActions;
 use learner::hrl::{Agent, EpisodeTrace};
 use learner::run::artefact::build_agent;
 use learner::run::config::{MAX_EVAL_SEEDS, read_config, trained_env_steps};
@@ -41,6 +42,13 @@ pub struct EvaluateArgs {
     /// rewards (and lava) are the other task's.
     #[arg(long)]
     pub task: Option<Task>,
+    /// How the agent acts: `sample` draws its actions and goals from its
+    /// policies, `greedy` takes each policy's most likely choice (the
+    /// Worker's action; the Manager's wide goal, then its narrow goal). The
+    /// run's own `agent.eval_actions` by default, the one its validation
+    /// and test used.
+    #[arg(long, value_parser = ["sample", "greedy"])]
+    pub eval_actions: Option<String>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -56,7 +64,11 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(path) = &a.picture {
         crate::picture_path::prepare("--picture", path)?;
     }
-    let mut scored = ScoredRun::open(&a.run, a.task)?;
+    let eval_actions = a.eval_actions.as_deref().map(|name| match name {
+        "greedy" => EvalActions::Greedy,
+        _ => EvalActions::Sample,
+    });
+    let mut scored = ScoredRun::open(&a.run, a.task, eval_actions)?;
     let mut env = eval_env(
         &scored.layout,
         scored.env_cfg,
@@ -98,7 +110,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
         let (task, trained_on) = (scored.task.name(), scored.state.identity.task.name());
         println!(
             "{}",
-            serde_json::json!({"score": score, "task": task, "trained_on": trained_on, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "per_round": scores, "finished": scored.unfinished.is_none(), "env_steps": scored.state.env_steps, "episodes": episodes})
+            serde_json::json!({"score": score, "task": task, "trained_on": trained_on, "seeds": a.seeds, "episodes_per_seed": a.episodes_per_seed, "eval_actions": scored.eval_actions, "per_round": scores, "finished": scored.unfinished.is_none(), "env_steps": scored.state.env_steps, "episodes": episodes})
         );
     } else {
         print_evaluation(&a, &scored, score, &episodes);
@@ -132,6 +144,8 @@ struct ScoredRun {
     layout: Layout,
     env_cfg: EnvConfig,
     agent: Agent,
+    /// How the agent acts.
+    eval_actions: EvalActions,
     /// The run's budget, when it has not trained it all.
     unfinished: Option<u64>,
 }
@@ -140,7 +154,12 @@ impl ScoredRun {
     /// Opens `run` (refusing a discovery run or a directory that is not a
     /// train run) for scoring on `task` (its own by default; another task
     /// only among the MultiGoal tasks, which share actions and layout).
-    fn open(run: &Path, task: Option<Task>) -> anyhow::Result<ScoredRun> {
+    /// `eval_actions` replaces the run's own way of acting.
+    fn open(
+        run: &Path,
+        task: Option<Task>,
+        eval_actions: Option<EvalActions>,
+    ) -> anyhow::Result<ScoredRun> {
         if let Some(kind @ RunKind::Discover) = kind_of(run) {
             bail!(
                 "{} is {}, not a train run: evaluate scores a train run's best checkpoint (give \
@@ -182,8 +201,10 @@ impl ScoredRun {
         // The run's episode step limit (0 in a run recorded before it was a
         // setting: the environment's own).
         env_cfg.max_steps = id.config.episode_limit(env_cfg.max_steps);
+        let mut agent_cfg = id.config.agent.clone();
+        agent_cfg.eval_actions = eval_actions.unwrap_or(agent_cfg.eval_actions);
         let mut agent = build_agent(
-            &id.config.agent,
+            &agent_cfg,
             &layout,
             id.task,
             id.world_graph.as_deref().map(Path::new),
@@ -197,6 +218,7 @@ impl ScoredRun {
             layout,
             env_cfg,
             agent,
+            eval_actions: agent_cfg.eval_actions,
             unfinished,
         })
     }
@@ -222,11 +244,15 @@ fn run_world(run: &Path, maze: &str, task: Task) -> anyhow::Result<(Layout, EnvC
 fn print_evaluation(a: &EvaluateArgs, s: &ScoredRun, score: f64, episodes: &EpisodeFigures) {
     let trained_on = s.state.identity.task;
     println!(
-        "{}: score {:.3} on test seeds {} ({} episode(s) per seed){}{}",
+        "{}: score {:.3} on test seeds {} ({} episode(s) per seed, {} actions){}{}",
         s.run.display(),
         score,
         a.seeds,
         a.episodes_per_seed,
+        match s.eval_actions {
+            EvalActions::Sample => "sampled",
+            EvalActions::Greedy => "greedy",
+        },
         if s.task == trained_on {
             String::new()
         } else {

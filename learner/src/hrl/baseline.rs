@@ -205,7 +205,8 @@ impl A2cAgent {
             );
             let out = self.learner.act(&obs, None, &carry.state, train);
             let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
-            let choices = crate::seeding::sample_categorical(&mut carry.rng, &probs, false);
+            let greedy = self.cfg.eval_actions.greedy(train);
+            let choices = crate::seeding::sample_categorical(&mut carry.rng, &probs, greedy);
             (choices, out.state, before)
         };
         let actions: Vec<u8> = choices.iter().map(|&i| self.actions[i as usize]).collect();

@@ -219,6 +219,10 @@ pub struct AgentConfig {
     /// best (`g_w` still pays on arrival, and a traversal's hand-over as
     /// [`HandOver`] says).
     pub narrow_pays_wide: bool,
+    /// How the agent acts when it is not training: in validation, in the
+    /// test and in `evaluate` (section 5 is silent). Training always
+    /// samples.
+    pub eval_actions: EvalActions,
     /// How the Worker's (or the baseline's) and the Manager's updates get
     /// their gradients: `"rust-core"` (production, the default; not written
     /// to `config.toml`) or `"tch"` (the reference the tests hold it equal
@@ -387,6 +391,7 @@ impl Default for AgentConfig {
             ball_shaping: 0.0,
             traverse_outside_window: false,
             narrow_pays_wide: false,
+            eval_actions: EvalActions::default(),
             grad_path: GradPath::RustCore,
             object_action_init: ObjectActionInit::default(),
             exit_candidate: ExitCandidate::default(),
@@ -657,6 +662,29 @@ impl WorldGraphInputs {
             graph: Some(WorldGraph::build(layout, &cfg, &[])?),
             gcp: None,
         })
+    }
+}
+
+/// How an agent chooses when it is not training (validation, test,
+/// `evaluate`). The paper states its protocol (best of 10 validation seeds,
+/// scored on 100 test seeds) but not whether the scored policy samples or
+/// takes its most likely choices; both are common in A2C codebases.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EvalActions {
+    /// Drawn from the policies, as in training.
+    #[default]
+    Sample,
+    /// Each policy's most likely choice: the Worker's (or the baseline's)
+    /// action, and the Manager's goal (WN: its most likely wide goal
+    /// `g_w`, then the most likely narrow goal `g_n` in that window).
+    Greedy,
+}
+
+impl EvalActions {
+    /// Chooses greedily on a step that does not train.
+    pub fn greedy(self, train: bool) -> bool {
+        !train && self == EvalActions::Greedy
     }
 }
 

@@ -94,7 +94,8 @@ impl HrlAgent {
         trace: Option<&mut Tracing<'_>>,
         stats: &mut StepCounts,
     ) -> Result<Acted, LearnerError> {
-        stats.add(self.manager.decide(ctl, obs, train, trace));
+        let greedy = self.cfg.eval_actions.greedy(train);
+        stats.add(self.manager.decide(ctl, obs, train, greedy, trace));
         if self.traverser.graph().is_some() {
             for (e, c) in ctl.envs.iter_mut().enumerate() {
                 self.traverser.try_start(&c.goal, &mut c.traversal, obs, e);
@@ -103,7 +104,7 @@ impl HrlAgent {
         let marks = self.worker.goal_marks(ctl.goals());
         let out = self.worker.act(obs, &marks, &ctl.worker_state, train);
         let probs = tch::no_grad(|| out.logits.softmax(-1, tch::Kind::Float));
-        let choices = crate::seeding::sample_categorical(&mut ctl.rng, &probs, false);
+        let choices = crate::seeding::sample_categorical(&mut ctl.rng, &probs, greedy);
         let mut actions: Vec<u8> = choices.iter().map(|&i| self.actions[i as usize]).collect();
         // Only object goals are judged on the objects under the goals.
         let goal_objects = if self.cfg.object_goals {
@@ -375,7 +376,7 @@ impl HrlAgent {
         }
         {
             let obs = env.observe();
-            counts.add(self.manager.decide(&mut ctl, &obs, true, None));
+            counts.add(self.manager.decide(&mut ctl, &obs, true, false, None));
             let marks = self.worker.goal_marks(ctl.goals());
             self.worker.bootstrap(&obs, &marks, &ctl.worker_state);
             self.traverser

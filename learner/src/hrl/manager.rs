@@ -216,13 +216,15 @@ impl ManagerSide {
     /// The Manager decides for every environment of `ctl` that needs a new
     /// goal, on `obs`: its core steps, it picks the goals, and the Worker
     /// starts a fresh goal episode towards them. With `record`, the
-    /// decisions join the training queues; `trace` records the traced
-    /// environment's.
+    /// decisions join the training queues; with `greedy`, each goal is
+    /// the policy's most likely ([`super::config::EvalActions`]); `trace`
+    /// records the traced environment's.
     pub(super) fn decide(
         &self,
         ctl: &mut Controller,
         obs: &ObsView<'_>,
         record: bool,
+        greedy: bool,
         mut trace: Option<&mut Tracing<'_>>,
     ) -> Decisions {
         let mut made = Decisions::default();
@@ -258,8 +260,10 @@ impl ManagerSide {
             (step.values, chooser)
         };
         let picks = match self.net.head() {
-            ManagerHead::Feudal { .. } => self.pick_feudal(&chooser, &mut ctl.rng),
-            ManagerHead::WideNarrow(_) => self.pick_wide_narrow(&chooser, obs, &who, &mut ctl.rng),
+            ManagerHead::Feudal { .. } => self.pick_feudal(&chooser, &mut ctl.rng, greedy),
+            ManagerHead::WideNarrow(_) => {
+                self.pick_wide_narrow(&chooser, obs, &who, &mut ctl.rng, greedy)
+            }
         };
         drop(chooser);
         drop(own_net);
@@ -312,9 +316,9 @@ impl ManagerSide {
 
     /// FN: a subgoal cell per decision of `chooser` (section 4.1), drawn
     /// from the softmax over the valid cells (plus the goal map's logits).
-    fn pick_feudal(&self, chooser: &Chooser<'_>, rng: &mut ReplayRng) -> Vec<Pick> {
+    fn pick_feudal(&self, chooser: &Chooser<'_>, rng: &mut ReplayRng, greedy: bool) -> Vec<Pick> {
         let width = self.width * self.height;
-        crate::seeding::sample_rows(rng, &chooser.feudal(&self.net), width)
+        crate::seeding::choose_rows(rng, &chooser.feudal(&self.net), width, greedy)
             .into_iter()
             .map(|cell| Pick {
                 wide: cell as i64,
@@ -339,9 +343,10 @@ impl ManagerSide {
         obs: &ObsView<'_>,
         who: &[usize],
         rng: &mut ReplayRng,
+        greedy: bool,
     ) -> Vec<Pick> {
         let window = self.window.as_ref().expect("WN has a window");
-        let wide = crate::seeding::sample_rows(rng, &chooser.wide(), self.candidates.len());
+        let wide = crate::seeding::choose_rows(rng, &chooser.wide(), self.candidates.len(), greedy);
         let mut locals = Vec::new();
         let mut valids = Vec::new();
         for (j, &e) in who.iter().enumerate() {
@@ -370,10 +375,11 @@ impl ManagerSide {
             }
             valids.push(valid);
         }
-        let narrow = crate::seeding::sample_rows(
+        let narrow = crate::seeding::choose_rows(
             rng,
             &chooser.narrow(&wide, &locals.concat(), &valids.concat()),
             window.len(),
+            greedy,
         );
         (0..who.len())
             .map(|j| {

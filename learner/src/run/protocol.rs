@@ -525,6 +525,53 @@ mod tests {
         }
     }
 
+    /// `agent.eval_actions`: a greedy agent's test episodes are its
+    /// policies' most likely choices, so the sampling seed changes none of
+    /// them; a sampling agent's differ between seeds. For the flat baseline
+    /// and for WN (the Manager's goals as well as the Worker's actions).
+    #[test]
+    fn greedy_evaluation_plays_the_same_episodes_whatever_the_sampling_seed() {
+        use crate::hrl::config::{Candidates, EvalActions};
+        let layout = Maze::Small.layout(false);
+        let env_cfg = EnvConfig::for_task(Task::MultiGoal, &layout);
+        let episodes = |cfg: &AgentConfig, seed: u64| {
+            let mut agent = Agent::new(cfg, &layout, Task::MultiGoal, None, 3).unwrap();
+            let mut env = eval_env(&layout, env_cfg, TEST_STREAM, 0, 4).unwrap();
+            let mut t = EpisodeTrace::default();
+            let r = agent.evaluate(&mut env, seed, Some(&mut t)).unwrap();
+            (r.lengths, r.returns, t.cells, t.goals)
+        };
+        for kind in [AgentKind::A2c, AgentKind::WideNarrow] {
+            let sample = AgentConfig {
+                kind,
+                candidates: Candidates::All,
+                envs: 4,
+                hidden: 16,
+                conv_channels: [4, 8],
+                ..AgentConfig::default()
+            };
+            let greedy = AgentConfig {
+                eval_actions: EvalActions::Greedy,
+                ..sample.clone()
+            };
+            assert_eq!(
+                episodes(&greedy, 1),
+                episodes(&greedy, 2),
+                "{kind:?}: greedy episodes differ between sampling seeds"
+            );
+            assert_ne!(
+                episodes(&sample, 1),
+                episodes(&sample, 2),
+                "{kind:?}: sampled episodes are the same for two seeds"
+            );
+            assert_ne!(
+                episodes(&greedy, 1),
+                episodes(&sample, 1),
+                "{kind:?}: the greedy agent plays the sampling one's episodes"
+            );
+        }
+    }
+
     /// Issue 21: a real test episode records the grid it started on and
     /// the grid it ended on, and they agree with the simulator's return
     /// (MultiGoal: +1 a ball, +1 at the exit, −0.01 a step).
