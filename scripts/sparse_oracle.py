@@ -26,6 +26,70 @@ DIRS = [(1, 0), (0, 1), (-1, 0), (0, -1)]
 FACING = {">": 0, "v": 1, "<": 2, "^": 3}
 
 
+class Maze:
+    """A layout file's floor, its start and its exit, with shortest paths in
+    the simulator's moves (states `(x, y, dir)`; the exit ends the episode,
+    so no path crosses it)."""
+
+    def __init__(self, path):
+        rows = [r for r in open(path).read().split("\n") if r]
+        self.width = len(rows[0])
+        self.cells = {(x, y): ch for y, r in enumerate(rows) for x, ch in enumerate(r)}
+        self.start = next((c, FACING[ch]) for c, ch in self.cells.items() if ch in FACING)
+        self.exit_cell = next(c for c, ch in self.cells.items() if ch == "E")
+        self.free = [c for c, ch in self.cells.items() if ch in "." or ch in FACING]
+        self.s0 = (self.start[0][0], self.start[0][1], self.start[1])
+        self._cache = {}
+
+    def dist_from(self, s):
+        """Steps from state `s = (x, y, dir)` to every reachable state."""
+        if s not in self._cache:
+            dist = {s: 0}
+            q = collections.deque([s])
+            while q:
+                x, y, d = cur = q.popleft()
+                nxt = [(x, y, (d + 1) % 4), (x, y, (d + 3) % 4)]
+                fx, fy = x + DIRS[d][0], y + DIRS[d][1]
+                if self.cells.get((fx, fy), "#") != "#" and (fx, fy) != self.exit_cell:
+                    nxt.append((fx, fy, d))
+                for n in nxt:
+                    if n not in dist:
+                        dist[n] = dist[cur] + 1
+                        q.append(n)
+            self._cache[s] = dist
+        return self._cache[s]
+
+    def to_exit(self, s):
+        """Steps from state `s` onto the exit."""
+        d = self.dist_from(s)
+        best = float("inf")
+        for k, (dx, dy) in enumerate(DIRS):
+            before = (self.exit_cell[0] - dx, self.exit_cell[1] - dy, k)
+            if before in d:
+                best = min(best, d[before] + 1)
+        return best
+
+    def through(self, frontier, cell):
+        """From `frontier` (`{state: steps}`), the fewest steps to stand on
+        `cell`, by the direction faced there."""
+        nf = {}
+        for s, t in frontier.items():
+            d = self.dist_from(s)
+            for k in range(4):
+                st = (cell[0], cell[1], k)
+                if st in d and nf.get(st, float("inf")) > t + d[st]:
+                    nf[st] = t + d[st]
+        return nf
+
+    def tour(self, cells):
+        """The fewest steps from the start through `cells` in this order,
+        then onto the exit."""
+        frontier = {self.s0: 0}
+        for c in cells:
+            frontier = self.through(frontier, c)
+        return min(t + self.to_exit(s) for s, t in frontier.items())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("layout", help="a layout file (sim/mazes/*.txt)")
@@ -40,41 +104,10 @@ def main():
         "(the learners' objective; 0.99 by default there) and report its undiscounted score",
     )
     a = ap.parse_args()
-
-    rows = [r for r in open(a.layout).read().split("\n") if r]
-    cells = {(x, y): ch for y, r in enumerate(rows) for x, ch in enumerate(r)}
-    start = next((c, FACING[ch]) for c, ch in cells.items() if ch in FACING)
-    exit_cell = next(c for c, ch in cells.items() if ch == "E")
-    free = [c for c, ch in cells.items() if ch in "." or ch in FACING]
-
-    cache = {}
-
-    def dist_from(s):
-        """Steps from state `s = (x, y, dir)` to every reachable state."""
-        if s not in cache:
-            dist = {s: 0}
-            q = collections.deque([s])
-            while q:
-                x, y, d = cur = q.popleft()
-                nxt = [(x, y, (d + 1) % 4), (x, y, (d + 3) % 4)]
-                fx, fy = x + DIRS[d][0], y + DIRS[d][1]
-                if cells.get((fx, fy), "#") != "#" and (fx, fy) != exit_cell:
-                    nxt.append((fx, fy, d))
-                for n in nxt:
-                    if n not in dist:
-                        dist[n] = dist[cur] + 1
-                        q.append(n)
-            cache[s] = dist
-        return cache[s]
-
-    def to_exit(s):
-        d = dist_from(s)
-        best = float("inf")
-        for k, (dx, dy) in enumerate(DIRS):
-            before = (exit_cell[0] - dx, exit_cell[1] - dy, k)
-            if before in d:
-                best = min(best, d[before] + 1)
-        return best
+    maze = Maze(a.layout)
+    start, s0 = maze.start, maze.s0
+    free = maze.free
+    to_exit = maze.to_exit
 
     def objective(k, steps):
         """What the oracle maximises: the score at `gamma = 1`, else the
@@ -94,14 +127,7 @@ def main():
         for order in itertools.permutations(range(a.balls)):
             frontier = {s0: 0}
             for i, b in enumerate(order):
-                nf = {}
-                for s, t in frontier.items():
-                    d = dist_from(s)
-                    for k in range(4):
-                        st = (balls[b][0], balls[b][1], k)
-                        if st in d and nf.get(st, float("inf")) > t + d[st]:
-                            nf[st] = t + d[st]
-                frontier = nf
+                frontier = maze.through(frontier, balls[b])
                 steps = min(t + to_exit(s) for s, t in frontier.items())
                 value = objective(i + 1, steps)
                 if value > best[0]:

@@ -1,5 +1,5 @@
-//! Files named on the command line for a picture (`sim render --png`,
-//! `evaluate --picture`): checked before any work is done. A missing folder
+//! Files named on the command line for a picture or a trace (`sim render
+//! --png`, `evaluate --picture`, `evaluate --trace`): checked before any work is done. A missing folder
 //! is created, and the command says so; a path that runs through a regular
 //! file, or that names a folder, is refused with a message naming it.
 

@@ -213,6 +213,35 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
         "{ep}\n{sp}"
     );
     assert!((s["score"].as_f64().unwrap() - g("mean_return")).abs() < 1e-4);
+    // `--trace` writes the first episode, the test's: the run's own
+    // `test_episode.json`, byte for byte.
+    let trace = a.join("evaluate-trace.json");
+    ok(&worldgraph(&[
+        "evaluate",
+        a.to_str().unwrap(),
+        "--seeds",
+        "0..5",
+        "--trace",
+        trace.to_str().unwrap(),
+    ]));
+    assert_eq!(read(&trace), read(&a.join("test_episode.json")));
+    // Greedy: every round plays the same episodes (the rounds differ only
+    // in the sampling seed), and the JSON says how the agent acted.
+    let out = ok(&worldgraph(&[
+        "evaluate",
+        a.to_str().unwrap(),
+        "--seeds",
+        "0..5",
+        "--episodes-per-seed",
+        "2",
+        "--eval-actions",
+        "greedy",
+        "--json",
+    ]));
+    let g: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(g["eval_actions"], "greedy");
+    assert_eq!(g["per_round"][0], g["per_round"][1], "{g}");
+    assert_eq!(e["eval_actions"], "sample");
     // Door-Key has other actions and another layout: refused, clearly.
     let out = worldgraph(&["evaluate", a.to_str().unwrap(), "--task", "doorkey"]);
     assert!(!out.status.success());

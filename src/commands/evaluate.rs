@@ -35,6 +35,12 @@ pub struct EvaluateArgs {
     /// Write a picture of the first episode here.
     #[arg(long)]
     pub picture: Option<PathBuf>,
+    /// Write the first episode's trace here as JSON, in the format of a
+    /// run's `test_episode.json`: the cell after every step, the steps a
+    /// traversal took, the Manager's decisions `[step, g_w, g_n]` and the
+    /// grid at the start and at the end.
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
     /// Score the agent on another task of its maze with the same actions
     /// (multigoal, multigoal-sparse, multigoal-stochastic), e.g. how a policy
     /// trained on dense rewards scores under the sparse ones; the run's own
@@ -63,6 +69,9 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     );
     if let Some(path) = &a.picture {
         crate::picture_path::prepare("--picture", path)?;
+    }
+    if let Some(path) = &a.trace {
+        crate::picture_path::prepare("--trace", path)?;
     }
     let eval_actions = a.eval_actions.as_deref().map(|name| match name {
         "greedy" => EvalActions::Greedy,
@@ -105,6 +114,10 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
             first,
         )
         .save_png(p)?;
+    }
+    if let Some(path) = &a.trace {
+        sim::atomic_file::write_atomic(path, &serde_json::to_vec(&trace)?)
+            .with_context(|| format!("--trace {}", path.display()))?;
     }
     if a.json {
         let (task, trained_on) = (scored.task.name(), scored.state.identity.task.name());
