@@ -219,6 +219,13 @@ pub struct AgentConfig {
     /// best (`g_w` still pays on arrival, and a traversal's hand-over as
     /// [`HandOver`] says).
     pub narrow_pays_wide: bool,
+    /// The Worker's reward for each ball it collects on its own steps (not
+    /// a traversal's), on top of its goal rewards (the paper is silent; the
+    /// Worker is paid by the Manager's goals alone). MultiGoal-Sparse pays
+    /// the balls only at the exit, so a Worker walking one cell past a ball
+    /// the Manager did not name has nothing to turn for. Paid in training
+    /// only, never to the Manager. 0: off.
+    pub worker_ball_reward: f32,
     /// How the agent acts when it is not training: in validation, in the
     /// test and in `evaluate` (section 5 is silent). Training always
     /// samples.
@@ -391,6 +398,7 @@ impl Default for AgentConfig {
             ball_shaping: 0.0,
             traverse_outside_window: false,
             narrow_pays_wide: false,
+            worker_ball_reward: 0.0,
             eval_actions: EvalActions::default(),
             grad_path: GradPath::RustCore,
             object_action_init: ObjectActionInit::default(),
@@ -429,6 +437,12 @@ impl AgentConfig {
             return Err(ConfigError::new(
                 "ball_shaping",
                 format!("{} must be a finite weight ≥ 0", self.ball_shaping),
+            ));
+        }
+        if !(self.worker_ball_reward.is_finite() && self.worker_ball_reward >= 0.0) {
+            return Err(ConfigError::new(
+                "worker_ball_reward",
+                format!("{} must be a finite reward ≥ 0", self.worker_ball_reward),
             ));
         }
         if !(self.worker_task_share.is_finite() && self.worker_task_share >= 0.0) {

@@ -118,6 +118,13 @@ pub(super) fn ball_shaping(
     weight * (gamma as f32 * after - f32::from(before))
 }
 
+/// The balls one step collected: `before` the balls before it
+/// ([`balls_before`]), `meta` its record (a record that ended the episode
+/// still counts the episode's balls).
+pub(super) fn balls_collected(before: u8, meta: &shm_schemas::EnvMeta) -> u8 {
+    meta.balls.saturating_sub(before)
+}
+
 /// One environment's hierarchical state.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub(super) struct EnvCtl {

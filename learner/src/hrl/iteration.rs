@@ -154,7 +154,7 @@ impl HrlAgent {
             let obs = env.observe();
             let before = super::controller::balls_before_batch(
                 obs.meta,
-                train && self.cfg.ball_shaping > 0.0,
+                train && (self.cfg.ball_shaping > 0.0 || self.cfg.worker_ball_reward > 0.0),
             );
             (
                 self.act(ctl, &obs, train, trace.as_deref_mut(), stats)?,
@@ -255,6 +255,10 @@ impl HrlAgent {
                 // step penalty (the Worker pays its own).
                 book.rewards[e] =
                     s.reward + self.cfg.worker_task_share * (m.reward - sim::task::STEP_PENALTY);
+                if train && self.cfg.worker_ball_reward > 0.0 {
+                    let collected = super::controller::balls_collected(balls_before[e], m);
+                    book.rewards[e] += self.cfg.worker_ball_reward * f32::from(collected);
+                }
                 book.dones[e] = s.done;
                 book.weights[e] = 1.0;
             }

@@ -597,3 +597,41 @@ fn ball_shaping_pays_each_ball_when_collected_and_keeps_the_optimum() {
         "{discounted} against {expected}"
     );
 }
+
+/// `agent.worker_ball_reward` counts the balls of the Worker's steps from
+/// the simulator's records: one on each step onto a ball, none on the
+/// others, none on the exit's step (whose record still holds the episode's
+/// balls), and none on a step the limit cuts after the balls.
+#[test]
+fn the_worker_is_paid_for_the_balls_its_steps_collect_and_no_more() {
+    let collected = |max_steps: u32| -> Vec<u8> {
+        let layout = Layout::parse("balls", BALL_CORRIDOR).expect("layout");
+        let env_cfg = EnvConfig {
+            task: Task::MultiGoalSparse,
+            max_steps,
+            balls: BallSpawn::Layout,
+            auto_reset: AutoReset::SameStep,
+        };
+        let mut env = InProcess::new(layout, env_cfg, 1, 3, 1).expect("env");
+        let mut out = Vec::new();
+        loop {
+            let before = controller::balls_before(&env.observe().meta[0]);
+            env.step(&[sim::action::FORWARD]).expect("step");
+            let m = env.observe().meta[0];
+            out.push(controller::balls_collected(before, &m));
+            if m.done() {
+                return out;
+            }
+        }
+    };
+    // `>.B.B.E`: balls on the 2nd and 4th steps, the exit on the 6th.
+    assert_eq!(collected(100), vec![0, 1, 0, 1, 0, 0]);
+    assert_eq!(collected(5), vec![0, 1, 0, 1, 0]);
+    let mut cfg = AgentConfig {
+        worker_ball_reward: -0.1,
+        ..AgentConfig::default()
+    };
+    assert!(cfg.validate().is_err(), "a negative ball reward is refused");
+    cfg.worker_ball_reward = 0.2;
+    assert!(cfg.validate().is_ok());
+}
