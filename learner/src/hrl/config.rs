@@ -691,7 +691,11 @@ pub enum EvalActions {
     Sample,
     /// Each policy's most likely choice: the Worker's (or the baseline's)
     /// action, and the Manager's goal (WN: its most likely wide goal
-    /// `g_w`, then the most likely narrow goal `g_n` in that window).
+    /// `g_w`, then the most likely narrow goal `g_n` in that window). In
+    /// a deterministic maze a greedy agent can repeat itself to the step
+    /// limit: a Manager that names the same goal again after every
+    /// horizon, over a Worker whose most likely action there does not
+    /// reach it, never gets out.
     Greedy,
 }
 
