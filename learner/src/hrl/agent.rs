@@ -115,10 +115,10 @@ impl HrlAgent {
             _ => None,
         };
         let mut traverser = Traverser::new(cfg, task, inputs.graph, inputs.gcp)?;
-        if cfg.traverse_outside_window
+        if (cfg.traverse_outside_window || cfg.traversal_ends_in_window)
             && let Some(window) = &manager.window
         {
-            traverser.start_outside(window.clone());
+            traverser.start_outside(window.clone(), cfg.traversal_ends_in_window);
         }
         let ctl = Controller::new(
             cfg.envs,

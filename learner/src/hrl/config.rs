@@ -209,6 +209,15 @@ pub struct AgentConfig {
     /// `g_w` is reached (the paper's wording taken literally). Changes
     /// nothing without traversal.
     pub traverse_outside_window: bool,
+    /// WN with traversal: a traversal ends as soon as it brings the agent
+    /// into the narrow window around `g_w`, `g_w` counted as reached, and
+    /// the Worker walks to `g_n` from there; no traversal starts inside the
+    /// window (as with `traverse_outside_window`). Section 4.3 transports
+    /// the agent to `g_w` itself; `g_n` lies anywhere in `g_w`'s window, so
+    /// the walk on from `g_w` can lead back the way the traversal came.
+    /// Off: the paper's, the traversal runs to `g_w`. A traversal to an
+    /// object (Door-Key's key or door) always runs to the front of it.
+    pub traversal_ends_in_window: bool,
     /// WN: reaching `g_n` pays `g_w` as well when `g_w` was not reached
     /// in the interval. Section 4.2 rewards the Worker "if reaching `g_w`
     /// or `g_n` within the horizon `c`"; read as one reward for each goal
@@ -397,6 +406,7 @@ impl Default for AgentConfig {
             count_bonus_fade: 0,
             ball_shaping: 0.0,
             traverse_outside_window: false,
+            traversal_ends_in_window: false,
             narrow_pays_wide: false,
             worker_ball_reward: 0.0,
             eval_actions: EvalActions::default(),

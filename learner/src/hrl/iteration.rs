@@ -228,6 +228,7 @@ impl HrlAgent {
                     ended,
                     self.horizon,
                     legs_before[e],
+                    self.traverser.end_window(),
                 );
                 book.legs[e] = s.leg;
                 stats.reached += usize::from(s.reached);

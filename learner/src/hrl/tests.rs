@@ -397,6 +397,49 @@ fn traversal_outside_the_window_leaves_a_near_wide_goal_to_the_worker() {
     assert_eq!(first_step_traversal(at(6, 1), false), n);
 }
 
+/// `traversal_ends_in_window`: from the start `(1, 1)` to `g_w = (6, 1)`
+/// the traversal replays east and ends on entering `g_w`'s 5×5 window
+/// (`x ≥ 4`), `g_w` counted as reached; the Worker walks on. Off, the same
+/// traversal is still under way there.
+#[test]
+fn a_traversal_that_ends_in_the_window_hands_g_n_to_the_worker_there() {
+    let n = 2;
+    let under_way_after_three = |ends_in_window: bool| {
+        let cfg = AgentConfig {
+            window: 5,
+            traversal_ends_in_window: ends_in_window,
+            ..small(AgentKind::WideNarrow, Candidates::Pivotal, n)
+        };
+        let (mut agent, mut env, mut ctl) = traversing_agent(&cfg, &[at(1, 1), at(6, 1)]);
+        hand_goals(&mut ctl, at(6, 1), at(5, 1), at(1, 1));
+        let mut counts = reports::StepCounts::default();
+        for _ in 0..3 {
+            agent
+                .step_batch(&mut ctl, &mut env, true, None, &mut counts)
+                .expect("step");
+        }
+        let obs = env.observe();
+        for e in 0..n {
+            assert_eq!(obs.meta[e].cell(9) as u32, at(4, 1), "the route replayed");
+        }
+        assert_eq!(counts.traversal_steps, 3 * n as u64);
+        ctl.envs
+            .iter()
+            .map(|c| (c.traversal.is_some(), c.goal.wide_paid, c.need_decision))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        under_way_after_three(true),
+        vec![(false, true, false); n],
+        "ended in the window, g_w paid, the interval goes on towards g_n"
+    );
+    assert_eq!(
+        under_way_after_three(false),
+        vec![(true, false, false); n],
+        "the paper's traversal runs on to g_w"
+    );
+}
+
 /// An agent of `cfg` on `n` corridors (episodes of at most 100 steps), its
 /// controller and its Worker's rollout started, ready to train.
 fn corridor_training(cfg: &AgentConfig, n: usize) -> (HrlAgent, InProcess, controller::Controller) {

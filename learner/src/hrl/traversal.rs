@@ -294,9 +294,11 @@ pub struct TraversalStep {
 /// Books a traversal step that led the agent to `cell` (`episode_ended`:
 /// the step ended the episode) for the traversal under way in `slot` and
 /// the Worker's `goal` of the interval (horizon `horizon`); `leg_before`:
-/// the leg a steered traversal was on before the step. Arriving pays `g_w`
-/// (the Worker does not take it again) and ends the traversal; so does
-/// stopping short.
+/// the leg a steered traversal was on before the step; `near`: the narrow
+/// window whose entry around `g_w` counts as arriving
+/// ([`super::config::AgentConfig::traversal_ends_in_window`]). Arriving
+/// pays `g_w` (the Worker does not take it again) and ends the traversal;
+/// so does stopping short.
 pub fn book_step(
     slot: &mut Option<Traversal>,
     goal: &mut WorkerGoal,
@@ -304,10 +306,17 @@ pub fn book_step(
     episode_ended: bool,
     horizon: u32,
     leg_before: Option<usize>,
+    near: Option<&Window>,
 ) -> TraversalStep {
     goal.moved_to(cell);
     let t = slot.as_mut().expect("a traversal under way");
-    let progress = t.advance(cell, episode_ended);
+    let mut progress = t.advance(cell, episode_ended);
+    if progress == Progress::Continue
+        && !t.stops_in_front()
+        && near.is_some_and(|w| w.slot_of(goal.wide, cell).is_some())
+    {
+        progress = Progress::Arrived;
+    }
     let leg = match leg_before {
         None => Leg::Idle,
         Some(before) => match progress {
@@ -385,6 +394,9 @@ pub(super) struct Traverser {
     /// No traversal starts while the agent stands in the narrow window
     /// around `g_w` ([`AgentConfig::traverse_outside_window`]).
     window: Option<Window>,
+    /// A traversal ends on entering that window
+    /// ([`AgentConfig::traversal_ends_in_window`]).
+    end_in_window: bool,
 }
 
 impl Traverser {
@@ -428,13 +440,21 @@ impl Traverser {
             steering,
             route: Route::with_capacity(1024, 64),
             window: None,
+            end_in_window: false,
         })
     }
 
     /// Starts no traversal while the agent stands in `window` around `g_w`
-    /// ([`AgentConfig::traverse_outside_window`]).
-    pub(super) fn start_outside(&mut self, window: Window) {
+    /// ([`AgentConfig::traverse_outside_window`]), and with `end_inside`
+    /// ends each on entering it ([`AgentConfig::traversal_ends_in_window`]).
+    pub(super) fn start_outside(&mut self, window: Window, end_inside: bool) {
         self.window = Some(window);
+        self.end_in_window = end_inside;
+    }
+
+    /// The window whose entry ends a traversal, if any ([`book_step`]).
+    pub(super) fn end_window(&self) -> Option<&Window> {
+        self.window.as_ref().filter(|_| self.end_in_window)
     }
 
     /// The world graph traversal follows (`None`: no traversal).
