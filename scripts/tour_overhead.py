@@ -21,6 +21,14 @@ names the balls in, and the oracle's score against the best order's to the
 balls the agent leaves. Scores are MultiGoal-Sparse's: `balls / 5 - 0.01 a
 step`.
 
+Two more figures say where those losses sit:
+- every Manager interval that named a ball as `g_n` and reached it, walked by
+  the Worker or helped by a traversal: its steps against the shortest walk
+  from where it began (the traces record no facing, so the agent is taken to
+  face its last move: an estimate);
+- the balls left, by how far they lie off the path walked (cells on the
+  floor from the nearest cell the agent stood on).
+
 Standard library only:
 
     for s in $(seq 100 150); do
@@ -30,13 +38,14 @@ Standard library only:
 """
 
 import argparse
+import collections
 import itertools
 import json
 import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from sparse_oracle import STEP_PENALTY, Maze  # noqa: E402
+from sparse_oracle import DIRS, STEP_PENALTY, Maze  # noqa: E402
 
 BALL = 2  # sim::Object::Ball
 
@@ -53,6 +62,24 @@ def main():
     def score(k, steps):
         return k / a.balls - STEP_PENALTY * steps
 
+    floor_cache = {}
+
+    def floor_dist(src):
+        """Cells on the floor from cell index `src` (moves, no turns)."""
+        if src not in floor_cache:
+            d = {src: 0}
+            q = collections.deque([src])
+            while q:
+                u = q.popleft()
+                for v in (u + 1, u - 1, u + maze.width, u - maze.width):
+                    if maze.cells.get(xy(v), "#") != "#" and v not in d:
+                        d[v] = d[u] + 1
+                        q.append(v)
+            floor_cache[src] = d
+        return floor_cache[src]
+
+    intervals = collections.defaultdict(lambda: [0, 0, 0])  # n, steps, shortest
+    left_off = collections.Counter()
     rows = []
     for path in a.traces:
         ep = json.load(open(path))
@@ -72,6 +99,29 @@ def main():
             for p in itertools.permutations(balls, k)
         )
         rows.append((path, exited, len(order), steps, same, best, oracle))
+        # The intervals that named a ball as g_n and reached it.
+        facing = [maze.start[1]]
+        for t in range(len(cells) - 1):
+            u, v = cells[t], cells[t + 1]
+            if u == v:
+                facing.append(facing[-1])
+            else:
+                (x0, y0), (x1, y1) = xy(u), xy(v)
+                facing.append(DIRS.index((x1 - x0, y1 - y0)))
+        goals = ep.get("goals", [])
+        for i, (start, _wide, narrow) in enumerate(goals):
+            end = goals[i + 1][0] if i + 1 < len(goals) else len(cells) - 1
+            if cells[end] != narrow or narrow not in balls:
+                continue
+            d = maze.dist_from((*xy(cells[start]), facing[start]))
+            shortest = min(d.get((*xy(narrow), k), float("inf")) for k in range(4))
+            kind = "with a traversal" if any(ep["traversed"][start:end]) else "walked"
+            intervals[kind][0] += 1
+            intervals[kind][1] += end - start
+            intervals[kind][2] += shortest
+        for b in balls:
+            if b not in order:
+                left_off[min(min(floor_dist(b).get(c, 99) for c in set(cells)), 3)] += 1
         print(
             f"{os.path.basename(path):24} balls {len(order)} steps {steps:4} same order {same:3} "
             f"best order {best:3}  score {score(len(order), steps):6.3f} oracle {oracle:6.3f}"
@@ -93,6 +143,18 @@ def main():
         f"to the order {STEP_PENALTY * (same - best):.3f}, "
         f"to the balls left {oracle - score(k, best):.3f}; oracle {oracle:.3f}"
     )
+    for kind, (count, taken, shortest) in sorted(intervals.items()):
+        print(
+            f"intervals to a ball, {kind}: {count}, {(taken - shortest) / count:.1f} steps "
+            "a ball more than the shortest walk (estimate)"
+        )
+    left = sum(left_off.values())
+    if left:
+        near = left_off[1] + left_off[2]
+        print(
+            f"balls left: {left / len(rows):.2f} an episode, {100 * near / left:.0f} % of them "
+            "one or two cells off the path walked"
+        )
 
 
 if __name__ == "__main__":
