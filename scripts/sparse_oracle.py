@@ -40,6 +40,26 @@ class Maze:
         self.free = [c for c, ch in self.cells.items() if ch in "." or ch in FACING]
         self.s0 = (self.start[0][0], self.start[0][1], self.start[1])
         self._cache = {}
+        self._floor_cache = {}
+
+    def xy(self, c):
+        """The `(x, y)` of cell index `c` (row-major, as traces name cells)."""
+        return (c % self.width, c // self.width)
+
+    def floor_dist(self, src):
+        """Moves on the floor (turns not counted, the exit passable) from
+        cell index `src` to every reachable cell index."""
+        if src not in self._floor_cache:
+            d = {src: 0}
+            q = collections.deque([src])
+            while q:
+                u = q.popleft()
+                for v in (u + 1, u - 1, u + self.width, u - self.width):
+                    if self.cells.get(self.xy(v), "#") != "#" and v not in d:
+                        d[v] = d[u] + 1
+                        q.append(v)
+            self._floor_cache[src] = d
+        return self._floor_cache[src]
 
     def dist_from(self, s):
         """Steps from state `s = (x, y, dir)` to every reachable state."""

@@ -57,26 +57,10 @@ def main():
     ap.add_argument("--balls", type=int, default=5, help="balls spawned an episode")
     a = ap.parse_args()
     maze = Maze(a.layout)
-    xy = lambda c: (c % maze.width, c // maze.width)  # noqa: E731
+    xy = maze.xy
 
     def score(k, steps):
         return k / a.balls - STEP_PENALTY * steps
-
-    floor_cache = {}
-
-    def floor_dist(src):
-        """Cells on the floor from cell index `src` (moves, no turns)."""
-        if src not in floor_cache:
-            d = {src: 0}
-            q = collections.deque([src])
-            while q:
-                u = q.popleft()
-                for v in (u + 1, u - 1, u + maze.width, u - maze.width):
-                    if maze.cells.get(xy(v), "#") != "#" and v not in d:
-                        d[v] = d[u] + 1
-                        q.append(v)
-            floor_cache[src] = d
-        return floor_cache[src]
 
     intervals = collections.defaultdict(lambda: [0, 0, 0])  # n, steps, shortest
     left_off = collections.Counter()
@@ -121,7 +105,7 @@ def main():
             intervals[kind][2] += shortest
         for b in balls:
             if b not in order:
-                left_off[min(min(floor_dist(b).get(c, 99) for c in set(cells)), 3)] += 1
+                left_off[min(min(maze.floor_dist(b).get(c, 99) for c in set(cells)), 3)] += 1
         print(
             f"{os.path.basename(path):24} balls {len(order)} steps {steps:4} same order {same:3} "
             f"best order {best:3}  score {score(len(order), steps):6.3f} oracle {oracle:6.3f}"

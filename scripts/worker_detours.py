@@ -22,6 +22,10 @@ import argparse
 import collections
 import json
 import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from sparse_oracle import Maze  # noqa: E402
 
 
 def main():
@@ -29,27 +33,7 @@ def main():
     ap.add_argument("layout", help="the runs' layout file (sim/mazes/*.txt); '#' is wall")
     ap.add_argument("runs", nargs="+", help="run directories holding test_episode.json")
     a = ap.parse_args()
-
-    rows = [r for r in open(a.layout).read().split("\n") if r]
-    width = len(rows[0])
-
-    def free(c):
-        return rows[c // width][c % width] != "#"
-
-    cache = {}
-
-    def dist(src):
-        if src not in cache:
-            d = {src: 0}
-            q = collections.deque([src])
-            while q:
-                u = q.popleft()
-                for v in (u + 1, u - 1, u + width, u - width):
-                    if free(v) and v not in d:
-                        d[v] = d[u] + 1
-                        q.append(v)
-            cache[src] = d
-        return cache[src]
+    dist = Maze(a.layout).floor_dist
 
     kinds = collections.Counter()
     print(f"{'run':60} {'moved':>5} {'straight':>8} {'via g_w':>7}  way")

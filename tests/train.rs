@@ -68,6 +68,15 @@ fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
+/// `worldgraph evaluate RUN ARGS... --json`, parsed.
+fn evaluate_json(run: &Path, args: &[&str]) -> serde_json::Value {
+    let run = run.to_str().unwrap();
+    let out = ok(&worldgraph(
+        &[&["evaluate", run], args, &["--json"]].concat(),
+    ));
+    serde_json::from_str(out.trim()).unwrap()
+}
+
 fn test_json(run: &Path) -> serde_json::Value {
     serde_json::from_str(&read(&run.join("test.json"))).unwrap()
 }
@@ -161,14 +170,7 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
         .fold(f64::MIN, f64::max);
     assert_eq!(t["best_validation"].as_f64().unwrap(), best);
     // Its score on the test seeds, re-scored by `evaluate`.
-    let out = ok(&worldgraph(&[
-        "evaluate",
-        a.to_str().unwrap(),
-        "--seeds",
-        "0..5",
-        "--json",
-    ]));
-    let e: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let e = evaluate_json(&a, &["--seeds", "0..5"]);
     assert_eq!(
         e["score"], t["test_score"],
         "evaluate reproduces the test score"
@@ -188,16 +190,7 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
     // The same policy scored under MultiGoal-Sparse's rewards: the same
     // episodes (the rewards do not steer it), each paying `balls / 5` at the
     // exit instead of `balls + 1`.
-    let out = ok(&worldgraph(&[
-        "evaluate",
-        a.to_str().unwrap(),
-        "--seeds",
-        "0..5",
-        "--task",
-        "multigoal-sparse",
-        "--json",
-    ]));
-    let s: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let s = evaluate_json(&a, &["--seeds", "0..5", "--task", "multigoal-sparse"]);
     assert_eq!(s["task"], "multigoal-sparse");
     assert_eq!(s["trained_on"], "multigoal");
     let sp = &s["episodes"];
@@ -227,18 +220,17 @@ fn a2c_runs_the_protocol_and_the_same_seed_gives_the_same_metrics() {
     assert_eq!(read(&trace), read(&a.join("test_episode.json")));
     // Greedy: every round plays the same episodes (the rounds differ only
     // in the sampling seed), and the JSON says how the agent acted.
-    let out = ok(&worldgraph(&[
-        "evaluate",
-        a.to_str().unwrap(),
-        "--seeds",
-        "0..5",
-        "--episodes-per-seed",
-        "2",
-        "--eval-actions",
-        "greedy",
-        "--json",
-    ]));
-    let g: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let g = evaluate_json(
+        &a,
+        &[
+            "--seeds",
+            "0..5",
+            "--episodes-per-seed",
+            "2",
+            "--eval-actions",
+            "greedy",
+        ],
+    );
     assert_eq!(g["eval_actions"], "greedy");
     assert_eq!(g["per_round"][0], g["per_round"][1], "{g}");
     assert_eq!(e["eval_actions"], "sample");

@@ -53,8 +53,8 @@ pub struct EvaluateArgs {
     /// Worker's action; the Manager's wide goal, then its narrow goal). The
     /// run's own `agent.eval_actions` by default, the one its validation
     /// and test used.
-    #[arg(long, value_parser = ["sample", "greedy"])]
-    pub eval_actions: Option<String>,
+    #[arg(long)]
+    pub eval_actions: Option<EvalActions>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -73,11 +73,7 @@ pub fn evaluate(a: EvaluateArgs) -> anyhow::Result<std::process::ExitCode> {
     if let Some(path) = &a.trace {
         crate::picture_path::prepare("--trace", path)?;
     }
-    let eval_actions = a.eval_actions.as_deref().map(|name| match name {
-        "greedy" => EvalActions::Greedy,
-        _ => EvalActions::Sample,
-    });
-    let mut scored = ScoredRun::open(&a.run, a.task, eval_actions)?;
+    let mut scored = ScoredRun::open(&a.run, a.task, a.eval_actions)?;
     let mut env = eval_env(
         &scored.layout,
         scored.env_cfg,

@@ -716,6 +716,17 @@ impl EvalActions {
     }
 }
 
+impl std::str::FromStr for EvalActions {
+    type Err = String;
+
+    /// The name `config.toml` writes: `sample` or `greedy`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        use serde::de::IntoDeserializer;
+        let named: Result<Self, serde::de::value::Error> = Self::deserialize(s.into_deserializer());
+        named.map_err(|_| format!("{s:?}: expected sample or greedy"))
+    }
+}
+
 /// How the Worker books a step on which the task ended the environment's
 /// episode (the exit, lava) before it reached `g_n`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]

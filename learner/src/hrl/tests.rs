@@ -562,9 +562,10 @@ fn the_count_bonus_pays_the_manager_beta_over_root_visits_and_outlives_a_checkpo
 /// A corridor with two balls on the way to the exit.
 const BALL_CORRIDOR: &str = "#########\n#>.B.B.E#\n#########\n";
 
-/// The shaping terms of the records of one scripted episode that walks the
-/// ball corridor east (MultiGoal-Sparse), cut after `max_steps` steps.
-fn shaping_of_walk(weight: f32, gamma: f64, max_steps: u32) -> Vec<(EnvMeta, f32)> {
+/// One scripted episode that walks the ball corridor east
+/// (MultiGoal-Sparse), cut after `max_steps` steps: each step's balls
+/// before it ([`controller::balls_before`]) and its record.
+fn ball_corridor_walk(max_steps: u32) -> Vec<(u8, EnvMeta)> {
     let layout = Layout::parse("balls", BALL_CORRIDOR).expect("layout");
     let env_cfg = EnvConfig {
         task: Task::MultiGoalSparse,
@@ -578,11 +579,19 @@ fn shaping_of_walk(weight: f32, gamma: f64, max_steps: u32) -> Vec<(EnvMeta, f32
         let before = controller::balls_before(&env.observe().meta[0]);
         env.step(&[sim::action::FORWARD]).expect("step");
         let m = env.observe().meta[0];
-        out.push((m, controller::ball_shaping(weight, gamma, before, &m)));
+        out.push((before, m));
         if m.done() {
             return out;
         }
     }
+}
+
+/// The shaping terms of the records of [`ball_corridor_walk`].
+fn shaping_of_walk(weight: f32, gamma: f64, max_steps: u32) -> Vec<(EnvMeta, f32)> {
+    ball_corridor_walk(max_steps)
+        .into_iter()
+        .map(|(before, m)| (m, controller::ball_shaping(weight, gamma, before, &m)))
+        .collect()
 }
 
 #[test]
@@ -648,24 +657,10 @@ fn ball_shaping_pays_each_ball_when_collected_and_keeps_the_optimum() {
 #[test]
 fn the_worker_is_paid_for_the_balls_its_steps_collect_and_no_more() {
     let collected = |max_steps: u32| -> Vec<u8> {
-        let layout = Layout::parse("balls", BALL_CORRIDOR).expect("layout");
-        let env_cfg = EnvConfig {
-            task: Task::MultiGoalSparse,
-            max_steps,
-            balls: BallSpawn::Layout,
-            auto_reset: AutoReset::SameStep,
-        };
-        let mut env = InProcess::new(layout, env_cfg, 1, 3, 1).expect("env");
-        let mut out = Vec::new();
-        loop {
-            let before = controller::balls_before(&env.observe().meta[0]);
-            env.step(&[sim::action::FORWARD]).expect("step");
-            let m = env.observe().meta[0];
-            out.push(controller::balls_collected(before, &m));
-            if m.done() {
-                return out;
-            }
-        }
+        ball_corridor_walk(max_steps)
+            .iter()
+            .map(|(before, m)| controller::balls_collected(*before, m))
+            .collect()
     };
     // `>.B.B.E`: balls on the 2nd and 4th steps, the exit on the 6th.
     assert_eq!(collected(100), vec![0, 1, 0, 1, 0, 0]);
