@@ -123,6 +123,12 @@ def main():
         help="pick the route that maximises the return discounted by gamma per step "
         "(the learners' objective; 0.99 by default there) and report its undiscounted score",
     )
+    ap.add_argument(
+        "--by-balls",
+        action="store_true",
+        help="also print, for each k, the mean best score of a route that takes at most k balls "
+        "(what each further ball is worth to a planner on this layout)",
+    )
     a = ap.parse_args()
     maze = Maze(a.layout)
     start, s0 = maze.start, maze.s0
@@ -141,9 +147,13 @@ def main():
     spawnable = [c for c in free if c != start[0]]
     s0 = (start[0][0], start[0][1], start[1])
     total = balls_total = steps_total = 0.0
+    # best_upto[k]: summed over spawns, the score of the best route taking at most k balls.
+    best_upto = [0.0] * (a.balls + 1)
     for _ in range(a.spawns):
         balls = rng.sample(spawnable, a.balls)
         best = (objective(0, to_exit(s0)), 0, to_exit(s0))
+        # by_count[k]: the best (objective, steps) of a route taking exactly k balls.
+        by_count = [best] + [None] * a.balls
         for order in itertools.permutations(range(a.balls)):
             frontier = {s0: 0}
             for i, b in enumerate(order):
@@ -152,6 +162,13 @@ def main():
                 value = objective(i + 1, steps)
                 if value > best[0]:
                     best = (value, i + 1, steps)
+                if by_count[i + 1] is None or value > by_count[i + 1][0]:
+                    by_count[i + 1] = (value, i + 1, steps)
+        upto = None
+        for k, route in enumerate(by_count):
+            if upto is None or route[0] > upto[0]:
+                upto = route
+            best_upto[k] += upto[1] / a.balls - STEP_PENALTY * upto[2]
         total += best[1] / a.balls - STEP_PENALTY * best[2]
         balls_total += best[1]
         steps_total += best[2]
@@ -162,6 +179,9 @@ def main():
     )
     direct = to_exit(s0)
     print(f"exit at once (no ball): {direct} steps, score {-STEP_PENALTY * direct:.3f}")
+    if a.by_balls:
+        for k, v in enumerate(best_upto):
+            print(f"at most {k} ball(s): mean score {v / n:.3f}")
 
 
 if __name__ == "__main__":
