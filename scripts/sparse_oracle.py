@@ -152,7 +152,8 @@ def main():
     for _ in range(a.spawns):
         balls = rng.sample(spawnable, a.balls)
         best = (objective(0, to_exit(s0)), 0, to_exit(s0))
-        # by_count[k]: the best (objective, steps) of a route taking exactly k balls.
+        # by_count[k]: the best (objective, balls, steps) of a route taking exactly k balls;
+        # `best` stays the first best found, so ties keep the oracle's figures as they were.
         by_count = [best] + [None] * a.balls
         for order in itertools.permutations(range(a.balls)):
             frontier = {s0: 0}
@@ -164,9 +165,9 @@ def main():
                     best = (value, i + 1, steps)
                 if by_count[i + 1] is None or value > by_count[i + 1][0]:
                     by_count[i + 1] = (value, i + 1, steps)
-        upto = None
+        upto = by_count[0]
         for k, route in enumerate(by_count):
-            if upto is None or route[0] > upto[0]:
+            if route[0] > upto[0]:
                 upto = route
             best_upto[k] += upto[1] / a.balls - STEP_PENALTY * upto[2]
         total += best[1] / a.balls - STEP_PENALTY * best[2]
