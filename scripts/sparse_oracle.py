@@ -7,8 +7,10 @@ than the agent's start, as the simulator spawns them), the oracle tries every
 subset and order of the balls followed by the exit, each leg a shortest path
 in the simulator's moves (`left`, `right`, `forward`, one step each; the exit
 ends the episode, so no leg crosses it), and keeps the best score
-`balls / spawned - 0.01 * steps`. Balls a route crosses on the way are not
-counted, so the figure is a slight underestimate.
+`balls / spawned - 0.01 * steps`. A ball a route crosses on the way is
+taken by the order that lists it there, at the same length, so the search is
+exact; `python/tests/test_sparse_oracle.py` checks it against a search over
+states and plays its routes in the simulator.
 
 Standard library only:
 
@@ -38,6 +40,8 @@ class Maze:
         self.start = next((c, FACING[ch]) for c, ch in self.cells.items() if ch in FACING)
         self.exit_cell = next(c for c, ch in self.cells.items() if ch == "E")
         self.free = [c for c, ch in self.cells.items() if ch in "." or ch in FACING]
+        # Where the simulator spawns balls: the floor other than the start.
+        self.spawnable = [c for c in self.free if c != self.start[0]]
         self.s0 = (self.start[0][0], self.start[0][1], self.start[1])
         self._cache = {}
         self._floor_cache = {}
@@ -110,6 +114,28 @@ class Maze:
         return min(t + self.to_exit(s) for s, t in frontier.items())
 
 
+def best_routes(maze, balls, objective):
+    """The oracle on one spawn: every subset and order of `balls` (cells),
+    each followed by the exit. Returns `(best, by_count)`, each route an
+    `(objective, balls taken, steps)`: `best` maximises `objective(k, steps)`,
+    `by_count[k]` is the best route taking exactly `k` balls (None if none can)."""
+    s0, to_exit = maze.s0, maze.to_exit
+    best = (objective(0, to_exit(s0)), 0, to_exit(s0))
+    # `best` stays the first best found, so ties keep the oracle's figures as they were.
+    by_count = [best] + [None] * len(balls)
+    for order in itertools.permutations(range(len(balls))):
+        frontier = {s0: 0}
+        for i, b in enumerate(order):
+            frontier = maze.through(frontier, balls[b])
+            steps = min(t + to_exit(s) for s, t in frontier.items())
+            value = objective(i + 1, steps)
+            if value > best[0]:
+                best = (value, i + 1, steps)
+            if by_count[i + 1] is None or value > by_count[i + 1][0]:
+                by_count[i + 1] = (value, i + 1, steps)
+    return best, by_count
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("layout", help="a layout file (sim/mazes/*.txt)")
@@ -131,9 +157,7 @@ def main():
     )
     a = ap.parse_args()
     maze = Maze(a.layout)
-    start, s0 = maze.start, maze.s0
-    free = maze.free
-    to_exit = maze.to_exit
+    s0, to_exit = maze.s0, maze.to_exit
 
     def objective(k, steps):
         """What the oracle maximises: the score at `gamma = 1`, else the
@@ -144,27 +168,12 @@ def main():
         return a.gamma**steps * k / a.balls - STEP_PENALTY * (1 - g**steps) / (1 - g)
 
     rng = random.Random(a.seed)
-    spawnable = [c for c in free if c != start[0]]
-    s0 = (start[0][0], start[0][1], start[1])
     total = balls_total = steps_total = 0.0
     # best_upto[k]: summed over spawns, the score of the best route taking at most k balls.
     best_upto = [0.0] * (a.balls + 1)
     for _ in range(a.spawns):
-        balls = rng.sample(spawnable, a.balls)
-        best = (objective(0, to_exit(s0)), 0, to_exit(s0))
-        # by_count[k]: the best (objective, balls, steps) of a route taking exactly k balls;
-        # `best` stays the first best found, so ties keep the oracle's figures as they were.
-        by_count = [best] + [None] * a.balls
-        for order in itertools.permutations(range(a.balls)):
-            frontier = {s0: 0}
-            for i, b in enumerate(order):
-                frontier = maze.through(frontier, balls[b])
-                steps = min(t + to_exit(s) for s, t in frontier.items())
-                value = objective(i + 1, steps)
-                if value > best[0]:
-                    best = (value, i + 1, steps)
-                if by_count[i + 1] is None or value > by_count[i + 1][0]:
-                    by_count[i + 1] = (value, i + 1, steps)
+        balls = rng.sample(maze.spawnable, a.balls)
+        best, by_count = best_routes(maze, balls, objective)
         upto = by_count[0]
         for k, route in enumerate(by_count):
             if route[0] > upto[0]:
