@@ -220,7 +220,7 @@ impl A2cAgent {
             let cell = obs.end_cell(e);
             stats.count_step(&obs, e, m.done());
             if let Some(t) = trace.as_deref_mut() {
-                t.step(&obs, e, cell, false, m.done());
+                t.step(&obs, e, actions[e], cell, false, m.done());
             }
             (rewards[e], dones[e]) = task_step(m);
             if train && self.cfg.count_bonus > 0.0 {

@@ -187,7 +187,7 @@ impl HrlAgent {
             let cell = obs.end_cell(e);
             stats.count_step(&obs, e, ended);
             if let Some(t) = trace.as_deref_mut() {
-                t.step(&obs, e, cell, traversing[e], ended);
+                t.step(&obs, e, acted.actions[e], cell, traversing[e], ended);
             }
             // The count-based exploration bonus (training only).
             let bonus = if train && self.cfg.count_bonus > 0.0 {

@@ -81,6 +81,10 @@ pub struct EpisodeTrace {
     pub cells: Vec<u32>,
     /// Whether each step was taken by traversal.
     pub traversed: Vec<bool>,
+    /// The action of each step (`sim::action`, MiniGrid's numbering), by
+    /// traversal or by the Worker (the flat agent's own).
+    #[serde(default)]
+    pub actions: Vec<u8>,
     /// Manager decisions: `(step, g_w, g_n)`.
     pub goals: Vec<(u32, u32, u32)>,
     /// The episode's return.
@@ -250,13 +254,14 @@ impl Tracing<'_> {
         }
     }
 
-    /// Records environment `e`'s step that produced `obs` and led the agent
-    /// to `cell` (`traversed`: by traversal; `ended`: the step ended the
-    /// episode, whose final grid the step record holds).
+    /// Records environment `e`'s step that took `action`, produced `obs` and
+    /// led the agent to `cell` (`traversed`: by traversal; `ended`: the step
+    /// ended the episode, whose final grid the step record holds).
     pub(super) fn step(
         &mut self,
         obs: &ObsView<'_>,
         e: usize,
+        action: u8,
         cell: u32,
         traversed: bool,
         ended: bool,
@@ -267,6 +272,7 @@ impl Tracing<'_> {
         let t = &mut *self.trace;
         t.cells.push(cell);
         t.traversed.push(traversed);
+        t.actions.push(action);
         self.step += 1;
         let cpe = obs.width * obs.height;
         if t.key_step.is_none() && obs.meta[e].end_carrying == sim::Object::Key as u8 {

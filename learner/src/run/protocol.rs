@@ -572,6 +572,58 @@ mod tests {
         }
     }
 
+    /// A trace's actions are the ones its episode took: played again in a
+    /// fresh environment of the same seed, they walk the trace's cells and
+    /// earn its return. For the flat baseline and for WN, whose traced
+    /// actions come from the Worker.
+    #[test]
+    fn a_traced_episode_replays_from_its_actions() {
+        use crate::hrl::config::Candidates;
+        let layout = Maze::Small.layout(false);
+        let env_cfg = EnvConfig::for_task(Task::MultiGoal, &layout);
+        for kind in [AgentKind::A2c, AgentKind::WideNarrow] {
+            let cfg = AgentConfig {
+                kind,
+                candidates: Candidates::All,
+                envs: 2,
+                hidden: 16,
+                conv_channels: [4, 8],
+                ..AgentConfig::default()
+            };
+            let mut agent = Agent::new(&cfg, &layout, Task::MultiGoal, None, 5).unwrap();
+            let mut env = eval_env(&layout, env_cfg, TEST_STREAM, 7, 2).unwrap();
+            let mut t = EpisodeTrace::default();
+            agent.evaluate(&mut env, 1, Some(&mut t)).unwrap();
+            assert_eq!(t.actions.len() + 1, t.cells.len(), "{kind:?}");
+            assert!(
+                t.actions.iter().any(|&a| a != t.actions[0]),
+                "{kind:?}: one action all episode"
+            );
+            // An evaluation starts its episodes with a reset (`play_episodes`).
+            let mut replay = eval_env(&layout, env_cfg, TEST_STREAM, 7, 2).unwrap();
+            replay.step(&[sim::action::RESET; 2]).unwrap();
+            assert_eq!(replay.observe().env_cells(0), &t.start_cells[..], "{kind:?}");
+            let mut episode_return = 0.0f32;
+            for (i, &a) in t.actions.iter().enumerate() {
+                replay.step(&[a, sim::action::LEFT]).unwrap();
+                let obs = replay.observe();
+                episode_return += obs.meta[0].reward;
+                assert_eq!(obs.end_cell(0), t.cells[i + 1], "{kind:?}: step {i}");
+                assert_eq!(
+                    obs.meta[0].done(),
+                    i + 1 == t.actions.len(),
+                    "{kind:?}: step {i} of {}",
+                    t.actions.len()
+                );
+            }
+            assert!(
+                (episode_return - t.episode_return).abs() < 1e-4,
+                "{kind:?}: replayed {episode_return}, traced {}",
+                t.episode_return
+            );
+        }
+    }
+
     /// Issue 21: a real test episode records the grid it started on and
     /// the grid it ended on, and they agree with the simulator's return
     /// (MultiGoal: +1 a ball, +1 at the exit, −0.01 a step).
