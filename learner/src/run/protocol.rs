@@ -525,13 +525,26 @@ mod tests {
         }
     }
 
+    /// A small agent of `kind` over `envs` environments, every cell a
+    /// candidate goal: quick to build, for tests of the evaluation path.
+    fn tiny_agent(kind: AgentKind, envs: usize) -> AgentConfig {
+        AgentConfig {
+            kind,
+            candidates: crate::hrl::config::Candidates::All,
+            envs,
+            hidden: 16,
+            conv_channels: [4, 8],
+            ..AgentConfig::default()
+        }
+    }
+
     /// `agent.eval_actions`: a greedy agent's test episodes are its
     /// policies' most likely choices, so the sampling seed changes none of
     /// them; a sampling agent's differ between seeds. For the flat baseline
     /// and for WN (the Manager's goals as well as the Worker's actions).
     #[test]
     fn greedy_evaluation_plays_the_same_episodes_whatever_the_sampling_seed() {
-        use crate::hrl::config::{Candidates, EvalActions};
+        use crate::hrl::config::EvalActions;
         let layout = Maze::Small.layout(false);
         let env_cfg = EnvConfig::for_task(Task::MultiGoal, &layout);
         let episodes = |cfg: &AgentConfig, seed: u64| {
@@ -542,14 +555,7 @@ mod tests {
             (r.lengths, r.returns, t.cells, t.goals)
         };
         for kind in [AgentKind::A2c, AgentKind::WideNarrow] {
-            let sample = AgentConfig {
-                kind,
-                candidates: Candidates::All,
-                envs: 4,
-                hidden: 16,
-                conv_channels: [4, 8],
-                ..AgentConfig::default()
-            };
+            let sample = tiny_agent(kind, 4);
             let greedy = AgentConfig {
                 eval_actions: EvalActions::Greedy,
                 ..sample.clone()
@@ -578,18 +584,10 @@ mod tests {
     /// actions come from the Worker.
     #[test]
     fn a_traced_episode_replays_from_its_actions() {
-        use crate::hrl::config::Candidates;
         let layout = Maze::Small.layout(false);
         let env_cfg = EnvConfig::for_task(Task::MultiGoal, &layout);
         for kind in [AgentKind::A2c, AgentKind::WideNarrow] {
-            let cfg = AgentConfig {
-                kind,
-                candidates: Candidates::All,
-                envs: 2,
-                hidden: 16,
-                conv_channels: [4, 8],
-                ..AgentConfig::default()
-            };
+            let cfg = tiny_agent(kind, 2);
             let mut agent = Agent::new(&cfg, &layout, Task::MultiGoal, None, 5).unwrap();
             let mut env = eval_env(&layout, env_cfg, TEST_STREAM, 7, 2).unwrap();
             let mut t = EpisodeTrace::default();
@@ -602,7 +600,11 @@ mod tests {
             // An evaluation starts its episodes with a reset (`play_episodes`).
             let mut replay = eval_env(&layout, env_cfg, TEST_STREAM, 7, 2).unwrap();
             replay.step(&[sim::action::RESET; 2]).unwrap();
-            assert_eq!(replay.observe().env_cells(0), &t.start_cells[..], "{kind:?}");
+            assert_eq!(
+                replay.observe().env_cells(0),
+                &t.start_cells[..],
+                "{kind:?}"
+            );
             let mut episode_return = 0.0f32;
             for (i, &a) in t.actions.iter().enumerate() {
                 replay.step(&[a, sim::action::LEFT]).unwrap();
