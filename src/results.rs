@@ -152,7 +152,10 @@ pub struct DiscoverResult {
     pub grid: String,
     /// `discovery.json` of the run, as `discover` wrote it.
     pub summary: serde_json::Value,
-    /// The commit the binary that ran it was built from ([`build_commit`]).
+    /// The commit the binary that ran it was built from: the last start in
+    /// the run's `invocations.txt`, so a discovery a grid reuses (copied
+    /// from another grid, or finished by an earlier binary) keeps its own;
+    /// `unknown` for a run made before `discover` recorded its starts.
     pub commit: String,
     /// The gradient path `π_g` trained on ([`RunResult::grad_path`]).
     #[serde(default = "grad_path_before_recorded")]

@@ -137,6 +137,31 @@ fn a_grid_records_its_runs_skips_them_on_restart_and_each_reproduces() {
         "{err}"
     );
     assert_eq!(std::fs::read(&disc_path).unwrap(), recorded);
+    // Its summary names the binary that made the discovery (the last start
+    // in its invocations.txt), not the one that recorded it: a discovery
+    // copied in from a grid run on an older commit keeps that commit.
+    assert_eq!(disc["commit"], wn["commit"]);
+    let invocations = d.join("results/runs/tiny/discover/small-seed-0/invocations.txt");
+    let made_by = std::fs::read_to_string(&invocations).unwrap();
+    let head = wn["commit"].as_str().unwrap();
+    assert!(made_by.contains(&format!("(commit {head}): ")), "{made_by}");
+    let older = "0123456789abcdef0123456789abcdef01234567";
+    std::fs::write(&invocations, made_by.replace(head, older)).unwrap();
+    std::fs::remove_file(&disc_path).unwrap();
+    ok(&worldgraph(
+        d,
+        &["experiment", "grid.toml", "--discoveries-only"],
+    ));
+    assert_eq!(json(&disc_path)["commit"], older);
+    // A discovery made before `discover` recorded its starts names none.
+    std::fs::remove_file(&invocations).unwrap();
+    std::fs::remove_file(&disc_path).unwrap();
+    ok(&worldgraph(
+        d,
+        &["experiment", "grid.toml", "--discoveries-only"],
+    ));
+    assert_eq!(json(&disc_path)["commit"], "unknown");
+    std::fs::write(&disc_path, &recorded).unwrap();
 
     // The same results under another budget are refused, not counted.
     std::fs::write(

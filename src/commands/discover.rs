@@ -185,6 +185,8 @@ fn open_run(
         config: cfg,
         num_actions,
         own_files,
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        commit: env!("WORLDGRAPH_BUILD_COMMIT").to_string(),
     })
 }
 

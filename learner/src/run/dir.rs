@@ -186,3 +186,15 @@ pub fn record_invocation(dir: &Path, version: &str, build: &str) -> anyhow::Resu
         .and_then(|mut f| f.write_all(line.as_bytes()))
         .with_context(|| format!("cannot append to {}", path.display()))
 }
+
+/// The commit of the binary that last started the run in `dir`, from its
+/// `invocations.txt` ([`record_invocation`]); `None` when the run records
+/// none (a run made before its command recorded invocations).
+pub fn last_invocation_commit(dir: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("invocations.txt")).ok()?;
+    text.lines().rev().find_map(|line| {
+        let rest = line.split_once(" (commit ")?.1;
+        let (commit, _) = rest.split_once("): ")?;
+        Some(commit.to_string())
+    })
+}

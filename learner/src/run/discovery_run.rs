@@ -12,7 +12,7 @@ use sim::Layout;
 use sim::atomic_file::write_atomic;
 
 use super::artefact::DiscoveryIdentity;
-use super::dir::{RunKind, check, lock};
+use super::dir::{RunKind, check, lock, record_invocation};
 use crate::batch_env::BatchEnvironment;
 use crate::discovery::{Discovery, DiscoveryConfig, RoundStats};
 
@@ -43,6 +43,12 @@ pub struct DiscoverySpec {
     /// Files a new directory may already hold (the lock, the `--config`
     /// file the user put there).
     pub own_files: Vec<String>,
+    /// The crate's version, for `invocations.txt`.
+    pub version: String,
+    /// The commit the binary was built from, for `invocations.txt`: the
+    /// grid runner names a discovery's commit from it, not from whichever
+    /// binary records the discovery's summary.
+    pub commit: String,
 }
 
 /// An open discovery run: its directory locked, its identity recorded, its
@@ -68,12 +74,15 @@ impl DiscoveryRun {
             config,
             num_actions,
             own_files,
+            version,
+            commit,
         } = spec;
         check("--run", &dir, RunKind::Discover, &own_files)?;
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create {}", dir.display()))?;
         let lock = lock(&dir, "discover")?;
         DiscoveryIdentity::new(&layout, envs, &config).check_and_record(&dir)?;
+        record_invocation(&dir, &version, &commit)?;
         let mut discovery = Discovery::new(config, &layout, envs, num_actions)?;
         let resumed = discovery.resume(&dir.join(CHECKPOINT_DIR))?;
         Ok(DiscoveryRun {

@@ -26,6 +26,7 @@ use sim::{Maze, Task};
 
 use learner::run::artefact::DiscoveryIdentity;
 use learner::run::config::TrainConfig;
+use learner::run::dir::last_invocation_commit;
 use learner::run::protocol::TestSummary;
 mod cell;
 mod cells;
@@ -378,7 +379,7 @@ fn record(plan: &Plan, job: &Job) -> anyhow::Result<()> {
                 spec: spec.clone(),
                 grid: plan.grid_label.clone(),
                 summary,
-                commit: plan.commit.clone(),
+                commit: last_invocation_commit(&dir).unwrap_or_else(|| "unknown".to_string()),
                 grad_path: DiscoveryIdentity::read(&dir)?
                     .config()
                     .gcp
