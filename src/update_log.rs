@@ -70,8 +70,8 @@ pub struct UpdateRow {
     /// Share of the training episodes that ended during the update carrying
     /// the key (Door-Key; `NaN` when none ended).
     pub key_share: f64,
-    /// Share of the training episodes that ended during the update with an
-    /// open door in their final grid (Door-Key: the locked door was opened;
+    /// Share of the training episodes that ended during the update in which
+    /// the locked door was opened (Door-Key: also when it was closed again;
     /// `NaN` when none ended).
     pub door_share: f64,
     /// Share of the training episodes that ended during the update in which

@@ -40,8 +40,8 @@ pub struct IterationStats {
     pub ball_goal_share: f64,
     /// Share of the episodes that ended carrying the key (Door-Key).
     pub key_share: f64,
-    /// Share of the episodes whose final grid has an open door (Door-Key:
-    /// the agent opened the locked one).
+    /// Door-Key: share of the episodes in which the agent opened the
+    /// locked door (unlocked it: it may be closed again by the end).
     pub door_share: f64,
     /// Door-Key: share of the episodes in which the key was picked up (it
     /// is carried at the end, or no longer lies in the final grid).
@@ -121,7 +121,7 @@ pub(super) struct StepCounts {
     pub(super) successes: usize,
     /// Those that ended carrying the key.
     pub(super) with_key: usize,
-    /// Those whose final grid has an open door.
+    /// Those in which a locked door was opened.
     pub(super) door_open: usize,
     /// Door-Key: those in which the key was picked up.
     pub(super) key_taken: usize,
@@ -173,8 +173,19 @@ impl StepCounts {
             self.with_key += usize::from(obs.meta[e].end_carrying == sim::Object::Key as u8);
             let cells = obs.width * obs.height;
             let last = obs.final_cells.get(e * cells..(e + 1) * cells);
+            // A door is unlocked once and never locked again (a toggle
+            // closes an open door, it does not lock it), so the episode
+            // opened a locked door when it ended with fewer locked doors
+            // than its layout starts with: the next episode's first grid,
+            // already in `cells`. Counting open doors in the final grid
+            // missed an agent that closed the door behind it.
+            let locked = |g: &[u8]| {
+                g.iter()
+                    .filter(|&&c| c == sim::Object::DoorLocked as u8)
+                    .count()
+            };
             self.door_open +=
-                usize::from(last.is_some_and(|g| g.contains(&(sim::Object::DoorOpen as u8))));
+                usize::from(last.is_some_and(|g| locked(g) < locked(obs.env_cells(e))));
             self.key_taken += usize::from(
                 self.door_key
                     && (obs.meta[e].end_carrying == sim::Object::Key as u8
@@ -442,29 +453,37 @@ mod tests {
 
     /// Door-Key's figures come from the final state of an episode: an
     /// episode cut by the step limit after the agent picked up the key and
-    /// opened the door counts in both; one that did neither in none.
+    /// opened the door counts in both, also when it closed the door again;
+    /// one that did neither in none.
     #[test]
     fn an_episode_that_took_the_key_and_opened_the_door_counts_in_both_shares() {
         let layout = Layout::parse("door", "######\n#>KD.#\n#...E#\n######").expect("layout");
         let cfg = EnvConfig {
             task: Task::DoorKey,
-            max_steps: 3,
+            max_steps: 4,
             ..EnvConfig::for_task(Task::DoorKey, &layout)
         };
-        let mut env = InProcess::new(layout, cfg, 2, 0, 1).expect("env");
+        let mut env = InProcess::new(layout, cfg, 3, 0, 1).expect("env");
         let mut counts = StepCounts::for_task(Task::DoorKey);
         // Environment 0 picks up the key, steps onto its cell, opens the
-        // door; environment 1 turns on the spot.
-        for a in [action::PICKUP, action::FORWARD, action::TOGGLE] {
-            env.step(&[a, action::LEFT]).expect("step");
+        // door; environment 1 turns on the spot; environment 2 does as 0,
+        // then closes the door behind it.
+        let steps = [
+            [action::PICKUP, action::LEFT, action::PICKUP],
+            [action::FORWARD, action::LEFT, action::FORWARD],
+            [action::TOGGLE, action::LEFT, action::TOGGLE],
+            [action::LEFT, action::LEFT, action::TOGGLE],
+        ];
+        for a in steps {
+            env.step(&a).expect("step");
             let obs = env.observe();
-            for e in 0..2 {
+            for e in 0..3 {
                 counts.count_step(&obs, e, obs.meta[e].done());
             }
         }
         let s = counts.iteration(LossFigures::default(), LossFigures::default());
-        assert_eq!(s.episodes, 2, "the step limit ends both episodes");
-        assert_eq!((s.key_share, s.door_share), (0.5, 0.5));
-        assert_eq!(s.key_taken_share, 0.5);
+        assert_eq!(s.episodes, 3, "the step limit ends every episode");
+        assert_eq!((s.key_share, s.door_share), (2.0 / 3.0, 2.0 / 3.0));
+        assert_eq!(s.key_taken_share, 2.0 / 3.0);
     }
 }

@@ -337,7 +337,9 @@ pub struct EpisodeOutcome {
     pub exited: bool,
     /// A key on the start grid was gone from its cell at the end.
     pub key_taken: bool,
-    /// A door closed or locked at the start was open at the end.
+    /// A door locked at the start was no longer locked at the end (it may
+    /// have been closed again: a toggle turns an open door closed, never
+    /// locked), or one closed at the start was open at the end.
     pub door_opened: bool,
 }
 
@@ -362,8 +364,8 @@ impl EpisodeOutcome {
             exited: last.and_then(|c| b.get(c)) == Some(&code(Object::Exit)),
             key_taken: gone(Object::Key) > 0,
             door_opened: a.iter().zip(b).any(|(&x, &y)| {
-                (x == code(Object::DoorLocked) || x == code(Object::DoorClosed))
-                    && y == code(Object::DoorOpen)
+                (x == code(Object::DoorLocked) && y != x)
+                    || (x == code(Object::DoorClosed) && y == code(Object::DoorOpen))
             }),
         })
     }
@@ -624,6 +626,34 @@ mod tests {
                 t.episode_return
             );
         }
+    }
+
+    /// A Door-Key episode that unlocked the door and closed it again
+    /// opened it; one that never unlocked it did not (the grids a real
+    /// episode of the tiny Door-Key layout starts and ends on).
+    #[test]
+    fn a_door_unlocked_then_closed_counts_as_opened() {
+        let layout = Layout::parse("door", "######\n#>KD.#\n#...E#\n######").unwrap();
+        let cfg = EnvConfig::for_task(Task::DoorKey, &layout);
+        let mut env = sim::Env::new(layout, cfg, 0, 0);
+        let start = env.grid().to_vec();
+        let mut outcome_after = |actions: &[u8]| {
+            for &a in actions {
+                env.step_meta(a);
+            }
+            let t = EpisodeTrace {
+                cells: vec![0],
+                start_cells: start.clone(),
+                end_cells: env.grid().to_vec(),
+                ..EpisodeTrace::default()
+            };
+            EpisodeOutcome::of(&t).unwrap()
+        };
+        let o = outcome_after(&[sim::action::PICKUP, sim::action::FORWARD]);
+        assert!(o.key_taken && !o.door_opened, "{o:?}");
+        assert!(outcome_after(&[sim::action::TOGGLE]).door_opened);
+        let closed = outcome_after(&[sim::action::TOGGLE]);
+        assert!(closed.door_opened, "{closed:?}");
     }
 
     /// Issue 21: a real test episode records the grid it started on and
