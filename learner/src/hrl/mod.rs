@@ -64,7 +64,7 @@ pub use config::{
     WorldGraphInputs,
 };
 pub use controller::SavedController;
-pub use reports::{EpisodeTrace, EvalResult, IterationStats};
+pub use reports::{EpisodeTrace, EvalResult, IterationStats, opened_a_door};
 pub use stage2::Agent;
 
 #[cfg(test)]

@@ -173,19 +173,9 @@ impl StepCounts {
             self.with_key += usize::from(obs.meta[e].end_carrying == sim::Object::Key as u8);
             let cells = obs.width * obs.height;
             let last = obs.final_cells.get(e * cells..(e + 1) * cells);
-            // A door is unlocked once and never locked again (a toggle
-            // closes an open door, it does not lock it), so the episode
-            // opened a locked door when it ended with fewer locked doors
-            // than its layout starts with: the next episode's first grid,
-            // already in `cells`. Counting open doors in the final grid
-            // missed an agent that closed the door behind it.
-            let locked = |g: &[u8]| {
-                g.iter()
-                    .filter(|&&c| c == sim::Object::DoorLocked as u8)
-                    .count()
-            };
-            self.door_open +=
-                usize::from(last.is_some_and(|g| locked(g) < locked(obs.env_cells(e))));
+            // The layout's start is the next episode's first grid, already
+            // in `cells`.
+            self.door_open += usize::from(last.is_some_and(|g| opened_a_door(obs.env_cells(e), g)));
             self.key_taken += usize::from(
                 self.door_key
                     && (obs.meta[e].end_carrying == sim::Object::Key as u8
@@ -243,6 +233,17 @@ pub(super) fn reached_exit(obs: &ObsView<'_>, e: usize) -> bool {
             .final_cells
             .get(e * obs.width * obs.height + obs.end_cell(e) as usize)
             .is_some_and(|&c| c == sim::Object::Exit as u8)
+}
+
+/// Whether an episode that started on grid `start` and ended on `end`
+/// opened a door: one locked at the start is no longer locked (it may have
+/// been closed again: a toggle turns an open door closed, never locked), or
+/// one closed at the start is open.
+pub fn opened_a_door(start: &[u8], end: &[u8]) -> bool {
+    use sim::Object::{DoorClosed, DoorLocked, DoorOpen};
+    start.iter().zip(end).any(|(&x, &y)| {
+        (x == DoorLocked as u8 && y != x) || (x == DoorClosed as u8 && y == DoorOpen as u8)
+    })
 }
 
 /// The evaluation episode being traced: environment `env`'s, `step` steps

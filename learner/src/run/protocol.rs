@@ -24,7 +24,7 @@ use sim::{BatchEnv, EnvConfig, Layout, Object, Task};
 use super::config::{RunIdentity, Schedule, TrainConfig};
 use crate::batch_env::{BatchEnvironment, InProcess};
 use crate::hrl::wide_narrow::Coverage;
-use crate::hrl::{Agent, EpisodeTrace, EvalResult, IterationStats};
+use crate::hrl::{Agent, EpisodeTrace, EvalResult, IterationStats, opened_a_door};
 
 /// Environment stream of the validation seeds: validation seed `v` is the
 /// environment `(VALIDATION_STREAM, v)`.
@@ -337,9 +337,7 @@ pub struct EpisodeOutcome {
     pub exited: bool,
     /// A key on the start grid was gone from its cell at the end.
     pub key_taken: bool,
-    /// A door locked at the start was no longer locked at the end (it may
-    /// have been closed again: a toggle turns an open door closed, never
-    /// locked), or one closed at the start was open at the end.
+    /// A door was opened ([`opened_a_door`]).
     pub door_opened: bool,
 }
 
@@ -363,10 +361,7 @@ impl EpisodeOutcome {
             collected: gone(Object::Ball),
             exited: last.and_then(|c| b.get(c)) == Some(&code(Object::Exit)),
             key_taken: gone(Object::Key) > 0,
-            door_opened: a.iter().zip(b).any(|(&x, &y)| {
-                (x == code(Object::DoorLocked) && y != x)
-                    || (x == code(Object::DoorClosed) && y == code(Object::DoorOpen))
-            }),
+            door_opened: opened_a_door(a, b),
         })
     }
 }
