@@ -245,6 +245,17 @@ impl Grid {
         Ok(())
     }
 
+    /// Whether the grid holds runs of configuration `config` on `maze`
+    /// and `task` (a group with them, on a maze with a budget).
+    pub fn declares(&self, maze: Maze, task: Task, config: &str) -> bool {
+        self.budget(maze).is_some()
+            && self.group.iter().any(|g| {
+                (g.mazes.is_empty() || g.mazes.contains(&maze))
+                    && g.tasks.contains(&task)
+                    && g.configs.iter().any(|c| c == config)
+            })
+    }
+
     /// The budget of `maze`.
     pub fn budget(&self, maze: Maze) -> Option<&MazeBudget> {
         self.maze.iter().find(|m| m.name == maze)

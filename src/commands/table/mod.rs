@@ -19,6 +19,7 @@ use crate::results::{DiscoverResult, RunResult, read_all_discoveries, read_all_r
 mod budgets;
 mod curves;
 mod discoveries;
+mod missing;
 mod paper;
 mod sets;
 mod tables;
@@ -112,7 +113,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         out.display(),
         out.display()
     );
-    let (runs, nested, discovered, shares) = read_sets(&a)?;
+    let (runs, nested, discovered, shares, grids) = read_sets(&a)?;
     if runs.is_empty() {
         return discoveries_only(&a, &out, &discovered);
     }
@@ -137,6 +138,7 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
         &runs,
         &nested,
         &shares,
+        &grids,
         &cells,
         reference.as_ref(),
         figures.as_ref(),
@@ -165,13 +167,15 @@ pub fn run(a: TableArgs) -> anyhow::Result<std::process::ExitCode> {
     Ok(std::process::ExitCode::SUCCESS)
 }
 
-/// The runs, the result sets below those named (not read), the discoveries
-/// and, with `--with`, what each set gives the page (empty without).
+/// The runs, the result sets below those named (not read), the discoveries,
+/// with `--with` what each set gives the page (empty without), and the grid
+/// files the sets keep.
 type Sets = (
     Vec<RunResult>,
     Vec<PathBuf>,
     Vec<DiscoverResult>,
     Vec<sets::SetShare>,
+    Vec<missing::KeptGrid>,
 );
 
 /// Reads `a.results` and the `--with` sets, merged block by block.
@@ -179,9 +183,11 @@ fn read_sets(a: &TableArgs) -> anyhow::Result<Sets> {
     let mut all = Vec::new();
     let mut nested = Vec::new();
     let mut discovered = Vec::new();
+    let mut grids = Vec::new();
     for dir in std::iter::once(&a.results).chain(&a.with) {
         let d = read_all_discoveries(dir)?;
         let (runs, n) = read_result_set(dir, !d.is_empty())?;
+        grids.extend(missing::kept_grids(dir, &runs));
         discovered.push(d);
         nested.extend(n);
         all.push((dir.clone(), runs));
@@ -189,7 +195,7 @@ fn read_sets(a: &TableArgs) -> anyhow::Result<Sets> {
     if a.with.is_empty() {
         let (_, runs) = all.pop().expect("one set");
         let d = discovered.pop().expect("one set");
-        return Ok((runs, nested, d, Vec::new()));
+        return Ok((runs, nested, d, Vec::new(), grids));
     }
     let (runs, shares) = sets::merge(all)?;
     for s in shares.iter().filter(|s| s.runs == 0) {
@@ -198,7 +204,13 @@ fn read_sets(a: &TableArgs) -> anyhow::Result<Sets> {
             s.dir.display()
         );
     }
-    Ok((runs, nested, sets::merge_discoveries(discovered), shares))
+    Ok((
+        runs,
+        nested,
+        sets::merge_discoveries(discovered),
+        shares,
+        grids,
+    ))
 }
 
 /// The run summaries of the result set `results` and the result sets below
@@ -293,8 +305,8 @@ fn cells_of(runs: &[RunResult]) -> Cells<'_> {
 
 /// The README, section by section: the preamble, the budgets, the time to
 /// score (the headline, put right after the budgets), the paper's Tables 1
-/// and 2 (section 5), the rliable aggregates, the budget per cell, and the
-/// validation curves (the paper's Figure 4, then every configuration's),
+/// and 2 (section 5) with the rows not yet run and their commands, the
+/// rliable aggregates, the budget per cell, and the validation curves (the paper's Figure 4, then every configuration's),
 /// whose figures are saved into `figures` (none without it).
 #[allow(clippy::too_many_arguments)]
 fn readme(
@@ -302,6 +314,7 @@ fn readme(
     runs: &[RunResult],
     nested: &[PathBuf],
     shares: &[sets::SetShare],
+    grids: &[missing::KeptGrid],
     cells: &Cells,
     reference: Option<&time_to_score::Reference>,
     figures: Option<&Figures>,
@@ -330,6 +343,23 @@ fn readme(
     )?);
     md.push_str(&tables::table1(runs, cells, &mazes));
     md.push_str(&tables::table2(runs, cells, &mazes));
+    let tasks: Vec<&str> = TASKS
+        .iter()
+        .copied()
+        .filter(|t| runs.iter().any(|r| r.task == *t))
+        .collect();
+    let giver = |m: &str, t: &str| -> Option<PathBuf> {
+        let block = (m.to_string(), t.to_string());
+        if shares.is_empty() {
+            pairs.contains(&block).then(|| a.results.clone())
+        } else {
+            shares
+                .iter()
+                .find(|s| s.blocks.contains(&block))
+                .map(|s| s.dir.clone())
+        }
+    };
+    md.push_str(&missing::section(cells, &mazes, &tasks, grids, &giver));
     md.push_str(&super::aggregate::section(
         runs,
         &super::aggregate::Layout {
