@@ -3,8 +3,9 @@
 //! with the paper's value beside it, the budget every cell used, the time
 //! each configuration took to reach a score, the rows short of their seeds
 //! with the command that runs each, and validation curves like the paper's
-//! Figure 4 (mean and spread over seeds), into the result set's own `README.md` with its figures in `figures/` beside it
-//! (`--out` elsewhere); or one page from several sets (`--with`).
+//! Figure 4 (mean and spread over seeds), into the result set's own
+//! `README.md` with its figures in `figures/` beside it (`--out`
+//! elsewhere); or one page from several sets (`--with`).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
