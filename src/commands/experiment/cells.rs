@@ -8,18 +8,9 @@ use std::collections::HashMap;
 
 use sim::Maze;
 
-use super::grid::{Grid, Group, config_named};
+use super::grid::{Grid, config_named};
 use super::{ExperimentArgs, Job, Plan, discovery_done};
 use crate::results::{DiscoverSpec, read_run, run_path};
-
-/// The mazes of a group: its own, or every maze of the grid.
-fn group_mazes(grid: &Grid, g: &Group) -> Vec<Maze> {
-    if g.mazes.is_empty() {
-        grid.maze.iter().map(|m| m.name).collect()
-    } else {
-        g.mazes.clone()
-    }
-}
 
 /// Every run of the grid, by cell index: one discovery per (maze, seed)
 /// that a configuration needs, in the order the training runs first need
@@ -30,7 +21,7 @@ pub(super) fn all_cells(grid: &Grid) -> anyhow::Result<Vec<Job>> {
     let mut out = Vec::new();
     let mut train = Vec::new();
     for g in &grid.group {
-        for maze in group_mazes(grid, g) {
+        for maze in grid.group_mazes(g) {
             for &task in &g.tasks {
                 for config in &g.configs {
                     let needs_graph = config_named(config)?.needs_discovery(task);
@@ -120,7 +111,7 @@ fn filters(a: &ExperimentArgs) -> String {
 fn unmatched_filters(grid: &Grid, a: &ExperimentArgs) -> Vec<String> {
     let mut out = Vec::new();
     for m in &a.mazes {
-        if !grid.group.iter().any(|g| group_mazes(grid, g).contains(m)) {
+        if !grid.group.iter().any(|g| grid.group_mazes(g).contains(m)) {
             out.push(format!("--maze {}", m.name()));
         }
     }

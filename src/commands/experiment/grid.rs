@@ -248,12 +248,20 @@ impl Grid {
     /// Whether the grid holds runs of configuration `config` on `maze`
     /// and `task` (a group with them, on a maze with a budget).
     pub fn declares(&self, maze: Maze, task: Task, config: &str) -> bool {
-        self.budget(maze).is_some()
-            && self.group.iter().any(|g| {
-                (g.mazes.is_empty() || g.mazes.contains(&maze))
-                    && g.tasks.contains(&task)
-                    && g.configs.iter().any(|c| c == config)
-            })
+        self.group.iter().any(|g| {
+            self.group_mazes(g).contains(&maze)
+                && g.tasks.contains(&task)
+                && g.configs.iter().any(|c| c == config)
+        })
+    }
+
+    /// The mazes of group `g`: its own, or every maze of the grid.
+    pub(super) fn group_mazes(&self, g: &Group) -> Vec<Maze> {
+        if g.mazes.is_empty() {
+            self.maze.iter().map(|m| m.name).collect()
+        } else {
+            g.mazes.clone()
+        }
     }
 
     /// The budget of `maze`.

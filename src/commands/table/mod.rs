@@ -307,8 +307,9 @@ fn cells_of(runs: &[RunResult]) -> Cells<'_> {
 /// The README, section by section: the preamble, the budgets, the time to
 /// score (the headline, put right after the budgets), the paper's Tables 1
 /// and 2 (section 5) with the rows not yet run and their commands, the
-/// rliable aggregates, the budget per cell, and the validation curves (the paper's Figure 4, then every configuration's),
-/// whose figures are saved into `figures` (none without it).
+/// rliable aggregates, the budget per cell, and the validation curves (the
+/// paper's Figure 4, then every configuration's), whose figures are saved
+/// into `figures` (none without it).
 #[allow(clippy::too_many_arguments)]
 fn readme(
     a: &TableArgs,
